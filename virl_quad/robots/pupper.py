@@ -1,0 +1,42 @@
+"""Stanford Pupper v2 constants (figures from ROBOTS.md; URDF in ``robots/pupper/``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from virl_quad.robots.spec import LEGS, ROBOTS_DIR, RobotSpec, per_leg
+
+SPEC = RobotSpec(
+    name="pupper",
+    urdf=str(ROBOTS_DIR / "pupper" / "pupper.urdf"),
+    urdf_in_pybullet_data=False,
+    joint_names=tuple(f"{leg}_{j}_joint" for leg in LEGS for j in ("abduction", "hip", "knee")),
+    foot_links=tuple(f"{leg}_foot" for leg in LEGS),
+    foot_radius=0.013,                                  # m
+    contact_fall_links=("base_link",) + tuple(f"{leg}_upper_leg" for leg in LEGS),
+    default_pose=per_leg(0.0, 0.6, -1.2),               # rad, puppersim's initial pose
+    joint_lower=per_leg(-0.6, -0.6, -2.6),              # rad
+    joint_upper=per_leg(0.6, 1.8, -0.2),                # rad
+    torque_limit=per_leg(1.7, 1.7, 1.7),                # N·m
+    velocity_limit=per_leg(25.0, 25.0, 25.0),           # rad/s
+    kp=per_leg(4.0, 4.0, 4.0),                          # N·m/rad
+    kd=per_leg(0.4, 0.4, 0.4),                          # N·m·s/rad
+    joint_damping=0.0045,                               # N·m·s/rad
+    joint_friction=0.021,                               # N·m
+    total_mass=2.135,                                   # kg: 0.991 + 4 x (0.106 + 0.142 + 0.038)
+    spawn_height=0.17,                                  # m, feet touch the ground in the default pose
+    sim_dt=0.002,                                       # s
+    substeps=10,                                        # -> 50 Hz policy
+    action_scale=0.3,                                   # rad per unit action
+    max_roll=0.4,                                       # rad (puppersim)
+    max_pitch=0.4,                                      # rad
+    min_base_height=0.05,                               # m
+    camera_distance=0.6,                                # m
+    camera_height=0.0,                                  # m
+    camera_yaw=90.0,                                    # deg: side view, robot walks left to right
+    camera_pitch=-15.0,                                 # deg
+    notes="Own URDF generated from public figures; explicit torque PD at 500 Hz, policy at 50 Hz.",
+)
+
+#: Joints mirrored between left and right legs have opposite abduction signs.
+MIRROR_SIGN = np.array([1.0, 1.0, 1.0] * 4)
