@@ -90,11 +90,13 @@ def joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float
     return s + "  </joint>\n"
 
 
-def with_armature(diag: tuple[float, float, float], axis: int, m: float, lever: float) -> tuple:
-    """Add the rotor's reflected inertia about the joint axis, expressed at the link's centre."""
-    d = list(diag)
-    d[axis] += ARMATURE
-    return tuple(d)
+def with_armature(diag: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Add the rotor's reflected inertia on all three principal axes.
+
+    Adding the same amount to every axis keeps the tensor physically valid
+    (triangle inequality), which adding it to the joint axis alone would not.
+    """
+    return tuple(d + ARMATURE for d in diag)
 
 
 def leg(name: str, sx: int, sy: int) -> str:
@@ -106,18 +108,18 @@ def leg(name: str, sx: int, sy: int) -> str:
     hip_com = (0.0, sy * ABD_OFFSET / 2, 0.0)
     out += joint(f"{name}_abduction_joint", "revolute", "base_link", hip,
                  (sx * HIP_X, sy * HIP_Y, 0.0), (1, 0, 0), LIMITS["abduction"])
-    out += link(hip, HIP_MASS, hip_com, with_armature(box_inertia(HIP_MASS, *HIP_BOX), 0, HIP_MASS, 0),
+    out += link(hip, HIP_MASS, hip_com, with_armature(box_inertia(HIP_MASS, *HIP_BOX)),
                 box(HIP_BOX), "dark", collide=False)
     out += joint(f"{name}_hip_joint", "revolute", hip, upper, (0.0, sy * ABD_OFFSET, 0.0),
                  (0, 1, 0), LIMITS["hip"])
     out += link(upper, UPPER_MASS, (0.0, 0.0, -UPPER_LEN / 2),
-                with_armature(box_inertia(UPPER_MASS, *UPPER_BOX), 1, UPPER_MASS, UPPER_LEN / 2),
+                with_armature(box_inertia(UPPER_MASS, *UPPER_BOX)),
                 box(UPPER_BOX), "light")
     out += joint(f"{name}_knee_joint", "revolute", upper, lower, (0.0, 0.0, -UPPER_LEN),
                  (0, 1, 0), LIMITS["knee"])
     lower_mass = LOWER_MASS - FOOT_MASS
     out += link(lower, lower_mass, (0.0, 0.0, -LOWER_LEN / 2),
-                with_armature(box_inertia(lower_mass, *LOWER_BOX), 1, lower_mass, LOWER_LEN / 2),
+                with_armature(box_inertia(lower_mass, *LOWER_BOX)),
                 box(LOWER_BOX), "dark", collide=False)
     out += joint(f"{name}_foot_joint", "fixed", lower, foot, (0.0, 0.0, -LOWER_LEN))
     out += link(foot, FOOT_MASS, (0.0, 0.0, 0.0), sphere_inertia(FOOT_MASS, FOOT_RADIUS),

@@ -25,17 +25,17 @@ SPEC = RobotSpec(
     joint_friction=0.021,                               # N·m
     total_mass=2.135,                                   # kg: 0.991 + 4 x (0.106 + 0.142 + 0.038)
     spawn_height=0.17,                                  # m, feet touch the ground in the default pose
-    sim_dt=0.002,                                       # s
-    substeps=10,                                        # -> 50 Hz policy
+    sim_dt=0.001,                                       # s (explicit PD on a 38 g shank needs 1 kHz)
+    substeps=20,                                        # -> 50 Hz policy
     action_scale=0.3,                                   # rad per unit action
     max_roll=0.4,                                       # rad (puppersim)
     max_pitch=0.4,                                      # rad
     min_base_height=0.05,                               # m
     camera_distance=0.6,                                # m
     camera_height=0.0,                                  # m
-    camera_yaw=90.0,                                    # deg: side view, robot walks left to right
+    camera_yaw=0.0,                                     # deg: side view from the right, robot walks left to right
     camera_pitch=-15.0,                                 # deg
-    notes="Own URDF generated from public figures; explicit torque PD at 500 Hz, policy at 50 Hz.",
+    notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
 )
 
 #: Joints mirrored between left and right legs have opposite abduction signs.

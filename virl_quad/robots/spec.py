@@ -68,7 +68,7 @@ class RobotSpec:
     min_base_height: float          # m, termination
     camera_distance: float          # m, third-person camera distance from the base
     camera_height: float            # m, camera target height above the base
-    camera_yaw: float               # deg, 90 = side view looking at the robot's left side
+    camera_yaw: float               # deg, 0 = side view from the robot's right, +x to the right of the image
     camera_pitch: float             # deg, negative looks down
     episode_seconds: float = 10.0   # s, time limit of one training episode
     notes: str = ""
