@@ -72,7 +72,8 @@ class World:
         bc = self.bc
         bc.setAdditionalSearchPath(pybullet_data.getDataPath())
         bc.setGravity(0, 0, -GRAVITY)
-        bc.setPhysicsEngineParameter(fixedTimeStep=spec.sim_dt, numSolverIterations=30)
+        bc.setPhysicsEngineParameter(fixedTimeStep=spec.sim_dt, numSolverIterations=30,
+                                   deterministicOverlappingPairs=1)
         self.ground = bc.loadURDF("plane100.urdf", useMaximalCoordinates=True)
         bc.changeVisualShape(self.ground, -1, textureUniqueId=bc.loadTexture(_checker_texture()),
                              rgbaColor=[1, 1, 1, 1])
@@ -147,12 +148,23 @@ class World:
         dq = np.zeros(12) if dq is None else np.asarray(dq, dtype=np.float64)
         base_pos = [0.0, 0.0, s.spawn_height] if base_pos is None else base_pos
         base_quat = [0.0, 0.0, 0.0, 1.0] if base_quat is None else base_quat
+        self._clear_contacts()
         self._teleport(self.robot, base_pos, base_quat, q, dq)
         self.bc.resetBaseVelocity(self.robot,
                                   [0.0, 0.0, 0.0] if base_lin_vel is None else list(base_lin_vel),
                                   [0.0, 0.0, 0.0] if base_ang_vel is None else list(base_ang_vel))
         self.tau = np.zeros(12)
         self.time = 0.0
+
+    def _clear_contacts(self) -> None:
+        """Drop the contact cache (solver warm start) so a reset does not depend on the last episode.
+
+        A teleport keeps PyBullet's persistent contact manifolds; one physics step with the robot
+        parked far from the ground removes them (then the caller teleports it back).
+        """
+        self.bc.resetBasePositionAndOrientation(self.robot, _PARK, [0, 0, 0, 1])
+        self.bc.resetBaseVelocity(self.robot, [0, 0, 0], [0, 0, 0])
+        self.bc.stepSimulation()
 
     def _teleport(self, body: int, base_pos, base_quat, q, dq=None) -> None:
         bc = self.bc

@@ -1,0 +1,78 @@
+"""The one policy-observation builder, used by training AND deployment.
+
+Everything here must be measurable on the real robot: IMU orientation and
+gyro, joint encoders, the previous action and (with a demonstration) the
+demonstration phase. Mismatched observations between simulation and robot
+are the classic sim-to-real bug, so the policy server calls
+:func:`policy_observation` too, and the exported metadata records
+:func:`policy_layout`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from virl_quad.robots.spec import RobotSpec
+
+ANG_VEL_SCALE = 0.25   # observation = 0.25 * gyro (rad/s)
+JOINT_VEL_SCALE = 0.05  # observation = 0.05 * dq (rad/s)
+LIN_VEL_SCALE = 2.0    # privileged observation = 2.0 * base velocity (m/s)
+
+
+def quat_rotate_inverse(quat_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate world vector ``v`` into the frame of orientation ``quat_xyzw`` (R^T v)."""
+    x, y, z, w = quat_xyzw
+    qv = np.array([x, y, z])
+    return v * (2.0 * w * w - 1.0) - np.cross(qv, v) * (2.0 * w) + qv * (2.0 * np.dot(qv, v))
+
+
+def projected_gravity(quat_xyzw: np.ndarray) -> np.ndarray:
+    """Unit gravity direction in the body frame, from the IMU orientation (xyzw)."""
+    return quat_rotate_inverse(np.asarray(quat_xyzw, dtype=np.float64), np.array([0.0, 0.0, -1.0]))
+
+
+def policy_layout(with_phase: bool) -> list[tuple[str, int, float]]:
+    """(name, size, scale) of each block of the policy observation, in order."""
+    layout = [
+        ("projected_gravity", 3, 1.0),
+        ("base_ang_vel_body", 3, ANG_VEL_SCALE),   # rad/s
+        ("joint_pos_minus_default", 12, 1.0),      # rad
+        ("joint_vel", 12, JOINT_VEL_SCALE),        # rad/s
+        ("last_action", 12, 1.0),
+    ]
+    if with_phase:
+        layout.append(("demo_phase_sin_cos", 2, 1.0))
+    return layout
+
+
+def policy_size(with_phase: bool) -> int:
+    """Length of the policy observation."""
+    return sum(n for _, n, _ in policy_layout(with_phase))
+
+
+def policy_observation(spec: RobotSpec, quat_xyzw: np.ndarray, gyro_body: np.ndarray, q: np.ndarray,
+                       dq: np.ndarray, last_action: np.ndarray, phase: float | None = None) -> np.ndarray:
+    """Build the float32 policy observation from robot measurements.
+
+    quat_xyzw: base orientation (IMU); gyro_body: rad/s in the body frame;
+    q: rad, dq: rad/s (canonical order); last_action: the policy's previous
+    output (unscaled); phase: demonstration phase in [0, 1) or None.
+    Raises ValueError on NaN/inf input or wrong sizes.
+    """
+    parts = [
+        projected_gravity(quat_xyzw),
+        np.asarray(gyro_body, dtype=np.float64) * ANG_VEL_SCALE,
+        np.asarray(q, dtype=np.float64) - spec.default_pose,
+        np.asarray(dq, dtype=np.float64) * JOINT_VEL_SCALE,
+        np.asarray(last_action, dtype=np.float64),
+    ]
+    if phase is not None:
+        parts.append(np.array([np.sin(2 * np.pi * phase), np.cos(2 * np.pi * phase)]))
+    sizes = [len(p) for p in parts]
+    expected = [n for _, n, _ in policy_layout(phase is not None)]
+    if sizes != expected:
+        raise ValueError(f"observation inputs have sizes {sizes}, expected {expected}")
+    obs = np.concatenate(parts).astype(np.float32)
+    if not np.all(np.isfinite(obs)):
+        raise ValueError("observation contains NaN or inf")
+    return obs

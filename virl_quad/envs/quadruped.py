@@ -1,0 +1,216 @@
+"""Gymnasium environment: one quadruped in PyBullet, proprioceptive policy state and camera frames.
+
+Observation (``gymnasium.spaces.Dict``):
+- ``policy``      float32, see :mod:`virl_quad.envs.observation` (what the robot can measure),
+- ``privileged``  float32: body-frame base velocity x2.0, base height (m), foot contacts,
+                  the randomised physical parameters (critic only),
+- ``agent_image`` uint8 (48, 48): the follow camera's view of the agent,
+- ``expert_image`` uint8 (48, 48): with a demonstration, its frame at the env's demonstration clock.
+Action: joint position offsets from the default pose, ``target = default + action_scale * a`` (rad),
+clipped to the joint limits. No task reward (0.0): the VIRL reward is computed by the trainer.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from virl_quad.demo.demonstration import Demonstration
+from virl_quad.envs import observation as obs_lib
+from virl_quad.envs.randomize import DRConfig, Randomization, sample
+from virl_quad.robots.spec import RobotSpec
+from virl_quad.sim.camera import FRAME_SIZE
+from virl_quad.sim.params import PhysicsParams
+from virl_quad.sim.world import RobotState, World
+
+# Nominal measurement noise std (x the episode's obs_noise draw), as legged_gym.
+NOISE_GRAVITY = 0.05   # unit vector components
+NOISE_GYRO = 0.2       # rad/s
+NOISE_Q = 0.01         # rad
+NOISE_DQ = 1.5         # rad/s
+PRIVILEGED_SIZE = 3 + 1 + 4 + PhysicsParams.vector_size()
+
+
+@dataclass
+class EnvConfig:
+    """Options of :class:`QuadrupedEnv` (all overridable through ``virl_quad.envs.make``)."""
+
+    episode_seconds: float | None = None   # s, time limit; None = the robot's default
+    time_limit: bool = True                # truncate at episode_seconds (the VecEnv does it itself)
+    action_scale: float | None = None      # rad per unit action; None = the robot's default
+    action_clip: float = 2.0               # |a| is clipped to this before scaling
+    randomize: bool = True                 # domain randomisation on/off
+    randomization: dict | None = None      # per-parameter range overrides, see DRConfig
+    render: bool = True                    # produce agent_image (off: a blank frame, faster)
+    demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
+    rsi: bool = True                       # reference state initialisation when the demo has a motion
+    terminate_on_fall: bool = True         # end the episode when the robot falls
+
+
+class QuadrupedEnv(gym.Env):
+    """One robot, one episode at a time. Build it with ``virl_quad.envs.make``."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(self, spec: RobotSpec, cfg: EnvConfig, render_mode: str | None = None) -> None:
+        self.robot, self.cfg = spec, cfg
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
+        self.world = World(spec)
+        self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig() if cfg.randomize else DRConfig.off())
+        self.demo = cfg.demo
+        if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
+            raise ValueError(f"demonstration is at {self.demo.fps:.3f} fps but {spec.name} is controlled at "
+                             f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
+        self.action_scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
+        seconds = cfg.episode_seconds if cfg.episode_seconds is not None else spec.episode_seconds
+        self.max_steps = int(round(seconds / spec.control_dt))
+        with_phase = self.demo is not None
+        n_policy = obs_lib.policy_size(with_phase)
+        image = gym.spaces.Box(0, 255, (FRAME_SIZE, FRAME_SIZE), np.uint8)
+        spaces = {
+            "policy": gym.spaces.Box(-np.inf, np.inf, (n_policy,), np.float32),
+            "privileged": gym.spaces.Box(-np.inf, np.inf, (PRIVILEGED_SIZE,), np.float32),
+            "agent_image": image,
+        }
+        if with_phase:
+            spaces["expert_image"] = image
+        self.observation_space = gym.spaces.Dict(spaces)
+        self.action_space = gym.spaces.Box(-cfg.action_clip, cfg.action_clip, (12,), np.float32)
+        self.rand: Randomization = sample(DRConfig.off(), np.random.default_rng(0), spec)
+        self.last_action = np.zeros(12)
+        self.steps = 0
+        self.demo_step = 0
+        self._history: deque = deque(maxlen=8)
+        self._next_push = np.inf
+        self._state: RobotState | None = None
+
+    # -- episode ---------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode: draw the randomisation, place the robot (RSI with a demo)."""
+        super().reset(seed=seed)
+        rng = self.np_random
+        self.rand = sample(self.dr, rng, self.robot)
+        self.world.apply_params(self.rand.physics)
+        self.demo_step = 0
+        if self.demo is not None:
+            self.demo_step = int(rng.integers(self.demo.num_frames))
+            if options and "demo_step" in options:
+                self.demo_step = int(options["demo_step"])
+        self._place_robot()
+        self.last_action = np.zeros(12)
+        self.steps = 0
+        self._history.clear()
+        self._state = self.world.state()
+        self._remember(self._state)
+        self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
+        return self._observation(), self._info()
+
+    def _place_robot(self) -> None:
+        motion = self.demo.motion if self.demo is not None else None
+        if motion is None or not self.cfg.rsi:
+            self.world.reset()
+            return
+        ref = motion.state_at(self.demo_step / self.demo.fps)
+        q = self.robot.clip_to_limits(ref.q)
+        self.world.reset(q=q, base_pos=ref.root_pos, base_quat=ref.root_quat, dq=ref.dq,
+                         base_lin_vel=ref.root_lin_vel, base_ang_vel=ref.root_ang_vel)
+
+    def step(self, action: np.ndarray):
+        """Apply one action (see module doc) for one control period."""
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (12,):
+            raise ValueError(f"action must have 12 entries, got shape {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError("action contains NaN or inf")
+        a = np.clip(a, -self.cfg.action_clip, self.cfg.action_clip)
+        target = self.robot.clip_to_limits(self.robot.default_pose + self.action_scale * a)
+        self.world.step(target)
+        self.steps += 1
+        self.demo_step += 1
+        self.last_action = a
+        if self.world.time >= self._next_push:
+            self._push()
+        self._state = s = self.world.state()
+        self._remember(s)
+        terminated = self.cfg.terminate_on_fall and self._fallen(s)
+        truncated = self.cfg.time_limit and self.steps >= self.max_steps and not terminated
+        return self._observation(), 0.0, bool(terminated), bool(truncated), self._info()
+
+    def _push(self) -> None:
+        angle = self.np_random.uniform(0, 2 * np.pi)
+        v = self.rand.push_velocity
+        self.world.push(np.array([v * np.cos(angle), v * np.sin(angle), 0.0]))
+        self._next_push += self.rand.push_interval
+
+    def _fallen(self, s: RobotState) -> bool:
+        sp = self.robot
+        return bool(s.fall_contact or abs(s.rpy[0]) > sp.max_roll or abs(s.rpy[1]) > sp.max_pitch
+                    or s.base_pos[2] < sp.min_base_height)
+
+    # -- observation -----------------------------------------------------------------------------
+    def _remember(self, s: RobotState) -> None:
+        self._history.append((s.time, s.base_quat, s.base_ang_vel_body, s.q, s.dq))
+
+    def _delayed(self) -> tuple[np.ndarray, ...]:
+        """Measurements as the robot would see them ``latency`` s ago (linear interpolation)."""
+        t = self._history[-1][0] - self.rand.latency
+        newer = self._history[-1]
+        for older in reversed(self._history):
+            if older[0] <= t:
+                break
+            newer = older
+        if older[0] >= t or newer is older:
+            return older[1:]
+        w = (t - older[0]) / (newer[0] - older[0])
+        quat = (1 - w) * older[1] + w * newer[1]
+        out = [quat / np.linalg.norm(quat)]
+        out += [(1 - w) * a + w * b for a, b in zip(older[2:], newer[2:])]
+        return tuple(out)
+
+    def _observation(self) -> dict:
+        quat, gyro, q, dq = self._delayed()
+        n = self.rand.obs_noise
+        if n > 0:
+            rng = self.np_random
+            gyro = gyro + rng.normal(0, NOISE_GYRO * n, 3)
+            q = q + rng.normal(0, NOISE_Q * n, 12)
+            dq = dq + rng.normal(0, NOISE_DQ * n, 12)
+        phase = self.demo.phase(self.demo_step) if self.demo is not None else None
+        policy = obs_lib.policy_observation(self.robot, quat, gyro, q, dq, self.last_action, phase)
+        if n > 0:
+            policy[:3] += self.np_random.normal(0, NOISE_GRAVITY * n, 3).astype(np.float32)
+        s = self._state
+        privileged = np.concatenate([
+            s.base_lin_vel_body * obs_lib.LIN_VEL_SCALE, [s.base_pos[2]], s.foot_contact.astype(np.float64),
+            self.rand.physics.as_vector(),
+        ]).astype(np.float32)
+        out = {"policy": policy, "privileged": privileged, "agent_image": self._agent_image()}
+        if self.demo is not None:
+            out["expert_image"] = self.demo.frames[self.demo.index(self.demo_step)]
+        return out
+
+    def _agent_image(self) -> np.ndarray:
+        if not self.cfg.render:
+            return np.zeros((FRAME_SIZE, FRAME_SIZE), np.uint8)
+        return self.world.render(cam=self.rand.camera)
+
+    def _info(self) -> dict:
+        s = self._state
+        return {"base_pos": s.base_pos.copy(), "time": s.time, "demo_step": self.demo_step}
+
+    @property
+    def state(self) -> RobotState:
+        """The latest simulator state (ground truth, for evaluation)."""
+        return self._state
+
+    def render(self):
+        """RGB preview (256x256) of the agent, for videos."""
+        return self.world.render(size=256, rgb=True, cam=self.rand.camera)
+
+    def close(self) -> None:
+        """Release the physics client."""
+        self.world.close()
