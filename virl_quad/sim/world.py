@@ -72,7 +72,7 @@ class World:
         bc = self.bc
         bc.setAdditionalSearchPath(pybullet_data.getDataPath())
         bc.setGravity(0, 0, -GRAVITY)
-        bc.setPhysicsEngineParameter(fixedTimeStep=spec.sim_dt, numSolverIterations=30,
+        bc.setPhysicsEngineParameter(fixedTimeStep=spec.sim_dt, numSolverIterations=10,
                                    deterministicOverlappingPairs=1)
         self.ground = bc.loadURDF("plane100.urdf", useMaximalCoordinates=True)
         bc.changeVisualShape(self.ground, -1, textureUniqueId=bc.loadTexture(_checker_texture()),

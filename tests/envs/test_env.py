@@ -1,0 +1,107 @@
+"""The gymnasium env: API conformance, determinism, termination, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from virl_quad import robots
+from virl_quad.envs import make
+
+ROBOTS = robots.names()
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_check_env(robot: str) -> None:
+    env = make(robot)
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=0)
+    assert obs["agent_image"].dtype == np.uint8 and obs["agent_image"].shape == (48, 48)
+    assert obs["agent_image"].std() > 5, "the camera frame should show something"
+    env.close()
+
+
+def _rollout(robot: str, seed: int, steps: int = 40) -> np.ndarray:
+    env = make(robot)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = [obs["policy"]]
+    for _ in range(steps):
+        obs, *_ = env.step(rng.uniform(-1, 1, 12))
+        out.append(np.concatenate([obs["policy"], obs["privileged"], obs["agent_image"].ravel()]))
+    env.close()
+    return np.concatenate([o.ravel() for o in out])
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_same_seed_same_trajectory(robot: str) -> None:
+    a, b, c = _rollout(robot, 3), _rollout(robot, 3), _rollout(robot, 4)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_reset_does_not_depend_on_previous_episode() -> None:
+    env = make("laikago")
+    first, _ = env.reset(seed=7)
+    a = np.ones(12)
+    after_one = env.step(a)[0]["policy"]
+    for _ in range(20):
+        env.step(-a)
+    env.reset(seed=7)
+    np.testing.assert_array_equal(env.step(a)[0]["policy"], after_one)
+    env.close()
+
+
+def test_collapse_terminates() -> None:
+    env = make("pupper", randomize=False)
+    env.reset(seed=0)
+    folded = np.array([0.0, -2.0, 2.0] * 4)  # hip forward, knee straight: the body drops
+    for step in range(200):
+        *_, terminated, truncated, _ = env.step(folded)
+        if terminated:
+            break
+    assert terminated and not truncated
+    env.close()
+
+
+def test_time_limit_truncates() -> None:
+    env = make("pupper", randomize=False, episode_seconds=0.2)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(12))[2:4] for _ in range(10)]
+    assert flags[-1] == (False, True) and all(f == (False, False) for f in flags[:-1])
+    env.close()
+
+
+def test_bad_input() -> None:
+    with pytest.raises(ValueError, match="pupper, laikago"):
+        make("spot")
+    with pytest.raises(ValueError, match="valid options"):
+        make("pupper", bogus=1)
+    with pytest.raises(ValueError, match="choose from"):
+        make("pupper", randomization={"gravity": (0, 1)})
+    env = make("pupper")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full(12, np.nan))
+    with pytest.raises(ValueError, match="12 entries"):
+        env.step(np.zeros(3))
+    env.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_pd_holds_default_pose_under_randomisation(robot: str) -> None:
+    """DR on, 50 seeds, 5 s each: holding the default pose never falls."""
+    env = make(robot, render=False, episode_seconds=5.0)
+    fell = []
+    for seed in range(50):
+        env.reset(seed=seed)
+        for _ in range(env.unwrapped.max_steps):
+            _, _, terminated, truncated, _ = env.step(np.zeros(12))
+            if terminated:
+                fell.append(seed)
+                break
+        assert terminated or truncated
+    env.close()
+    assert fell == []

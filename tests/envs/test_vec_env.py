@@ -1,0 +1,85 @@
+"""The rsl-rl VecEnv: auto-reset, time-out semantics, worker processes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from rsl_rl.env import VecEnv
+
+from virl_quad.envs.vec_env import QuadrupedVecEnv
+
+FOLD = torch.tensor([0.0, -2.0, 2.0] * 4)  # makes Pupper collapse (see test_env)
+
+
+@pytest.fixture(scope="module")
+def venv():
+    env = QuadrupedVecEnv("pupper", 4, num_workers=2, seed=0, episode_seconds=0.1, randomize=False)
+    yield env
+    env.close()
+
+
+def test_is_rsl_rl_vec_env(venv) -> None:
+    assert isinstance(venv, VecEnv)
+    obs = venv.get_observations()
+    assert set(obs.keys()) >= {"policy", "privileged", "agent_image"}
+    assert obs["policy"].shape == (4, 42) and obs["agent_image"].dtype == torch.uint8
+    assert venv.max_episode_length == 5  # 0.1 s at 50 Hz
+
+
+def test_time_outs_follow_episode_length_buf(venv) -> None:
+    venv.episode_length_buf[:] = torch.tensor([0, 1, 2, 3])  # as a runner randomising start lengths
+    seen = []
+    for _ in range(5):
+        _, rew, dones, extras = venv.step(torch.zeros(4, 12))
+        seen.append(extras["time_outs"].clone())
+        assert torch.equal(dones, extras["time_outs"] | extras["terminated"])
+        assert torch.all(rew == 0)
+    seen = torch.stack(seen)  # (step, env)
+    # env i times out after 5 - i steps, then restarts from 0
+    expected = torch.zeros(5, 4, dtype=torch.bool)
+    for i in range(4):
+        expected[4 - i, i] = True
+    assert torch.equal(seen, expected)
+    assert torch.equal(venv.episode_length_buf, torch.tensor([0, 1, 2, 3]))
+
+
+def test_auto_reset_after_fall() -> None:
+    env = QuadrupedVecEnv("pupper", 2, num_workers=0, seed=0, episode_seconds=10.0, randomize=False)
+    start = env.get_observations()["privileged"][:, 3].clone()  # base height (m)
+    actions = torch.stack([FOLD, torch.zeros(12)])
+    for _ in range(200):
+        obs, _, dones, extras = env.step(actions)
+        if dones[0]:
+            break
+    assert dones[0] and extras["terminated"][0] and not extras["time_outs"][0]
+    assert not dones[1]
+    # the returned observation is the new episode's: back at the spawn height
+    assert abs(float(obs["privileged"][0, 3]) - float(start[0])) < 0.01
+    assert env.episode_length_buf[0] == 0 and env.episode_length_buf[1] > 0
+    # the final frame of the finished episode is kept for the reward
+    assert extras["final_agent_image"].shape == (2, 48, 48)
+    assert not torch.equal(extras["final_agent_image"][0], obs["agent_image"][0])
+    env.close()
+
+
+def test_worker_layout_does_not_change_results() -> None:
+    runs = []
+    for workers in (0, 2):
+        env = QuadrupedVecEnv("pupper", 3, num_workers=workers, seed=11, episode_seconds=0.3)
+        torch.manual_seed(0)
+        out = [env.step(torch.randn(3, 12))[0]["policy"] for _ in range(20)]
+        runs.append(torch.stack(out))
+        env.close()
+    assert torch.equal(runs[0], runs[1])
+
+
+def test_bad_input() -> None:
+    with pytest.raises(ValueError, match="unknown robot"):
+        QuadrupedVecEnv("spot", 2, num_workers=0)
+    with pytest.raises(ValueError, match="num_envs"):
+        QuadrupedVecEnv("pupper", 0, num_workers=0)
+    env = QuadrupedVecEnv("pupper", 2, num_workers=0)
+    with pytest.raises(ValueError, match="actions must be"):
+        env.step(torch.zeros(3, 12))
+    env.close()
