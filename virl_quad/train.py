@@ -1,0 +1,156 @@
+"""Train a quadruped to move like one demonstration video (VIRL, Algorithm 1 on rsl-rl PPO).
+
+    python -m virl_quad.train --robot pupper                 # built-in trot demonstration, VIRL reward
+    python -m virl_quad.train --robot pupper --demo walk.mp4 # any video
+    python -m virl_quad.train --resume runs/pupper-virl-...   # continue a stopped run
+
+Writes into the run folder: ``checkpoint.pt`` (atomic, every --save-every
+iterations, on Ctrl-C and at the end), ``demo.npz`` (the demonstration),
+``tensorboard/``, and at the end ``report.json`` and ``side_by_side.mp4``.
+Export the result with ``python -m virl_quad.export RUN_DIR --out policies/NAME.pt``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
+from virl_quad.training import checkpoint
+from virl_quad.training.config import TrainArgs, rsl_rl_config, to_dict, validate
+
+
+def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
+    """Names of the options the user actually typed (to override a resumed run's config)."""
+    probe = argparse.ArgumentParser(add_help=False)
+    for action in parser._actions:
+        if action.option_strings and action.dest != "help":
+            probe.add_argument(*action.option_strings, dest=action.dest, default=argparse.SUPPRESS,
+                               **({"action": action.__class__} if isinstance(action, argparse.BooleanOptionalAction)
+                                  else {"nargs": action.nargs}))
+    return set(vars(probe.parse_known_args(argv)[0]))
+
+
+def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
+    """Apply --resume (saved config + explicitly typed options) and pick the run folder."""
+    if args.resume:
+        run_dir = Path(args.resume)
+        if not run_dir.is_dir():
+            raise UserError(f"resume folder {run_dir} does not exist")
+        data = checkpoint.load(run_dir)
+        saved = TrainArgs(**{k: v for k, v in data["config"].items() if k in {f.name for f in dataclasses.fields(TrainArgs)}})
+        args = dataclasses.replace(saved, **{k: getattr(args, k) for k in explicit if k not in ("resume", "run_dir")},
+                                   resume=str(run_dir), run_dir=str(run_dir))
+        return args, run_dir, data
+    run_dir = Path(args.run_dir or f"runs/{args.robot}-{args.reward}-{time.strftime('%Y%m%d-%H%M%S')}")
+    if (run_dir / checkpoint.LATEST).exists():
+        raise UserError(f"{run_dir} already holds a run: use --resume {run_dir} or another --run-dir")
+    return args, run_dir, None
+
+
+def _load_demo(args: TrainArgs, run_dir: Path):
+    from virl_quad import demo as demo_lib
+
+    saved = run_dir / "demo.npz"
+    if saved.exists():
+        return demo_lib.load(str(saved), args.robot)
+    d = demo_lib.load(args.demo, args.robot)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    from virl_quad.demo.render import save_npz
+
+    save_npz(d, saved)
+    return d
+
+
+def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
+    """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
+    from virl_quad.demo.score import evaluate
+    from virl_quad.envs.vec_env import QuadrupedVecEnv
+    from virl_quad.training.rewards import EnvReward, LearnedReward
+    from virl_quad.training.runner import VirlRunner
+
+    demo = _load_demo(args, run_dir)
+    oracle = args.reward == "oracle"
+    if oracle and demo.motion is None:
+        raise UserError("--reward oracle needs a demonstration with a reference motion (a gait or motion file)")
+    it0 = int(resume_data["iteration"]) if resume_data else 0
+    workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
+    env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
+                          seed=args.seed + 7919 * it0, device=args.device, demo=demo,
+                          randomize=args.randomize, episode_seconds=args.episode_seconds,
+                          oracle_reward=oracle)
+    source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
+                                                      args.reward_updates, args.seed, args.device)
+
+    def evaluator(policy):
+        return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
+                        episode_seconds=args.eval_seconds, randomize=args.randomize)
+
+    runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args), evaluate=evaluator,
+                        device=args.device)
+    return demo, env, runner
+
+
+def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
+    """Train (or resume), then write report.json and the side-by-side video."""
+    args, run_dir, data = _resolve(args, explicit)
+    validate(args)
+    if args.device.startswith("cuda") and not torch.cuda.is_available():
+        raise UserError("--device cuda asked for, but torch sees no CUDA device")
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    print(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
+          f"run_dir={run_dir}", flush=True)
+    demo, env, runner = build(args, run_dir, data)
+    try:
+        if data is not None:
+            runner.restore(data)
+            print(f"resumed at iteration {runner.current_learning_iteration} "
+                  f"({runner.env_steps:,d} env steps)", flush=True)
+        print(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
+              f"{', with reference motion' if demo.motion is not None else ''}", flush=True)
+        runner.train(args.iterations, args.minutes, args.save_every, args.eval_every,
+                     log=lambda s: print(s, flush=True))
+    finally:
+        env.close()
+    finish(args, run_dir, demo, runner)
+    return 0
+
+
+def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
+    """Final evaluation, report.json and side-by-side video."""
+    from virl_quad.demo.score import evaluate
+    from virl_quad.training.report import side_by_side_video, write_report
+    from virl_quad.training.runner import actor_policy
+
+    print("final evaluation ...", flush=True)
+    policy = actor_policy(runner.alg.get_policy().eval())
+    final = evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
+                     episode_seconds=args.eval_seconds, randomize=args.randomize)
+    report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
+              "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final}
+    write_report(run_dir / "report.json", report)
+    print(f"report: {run_dir / 'report.json'} (score {final.get('total', float('nan')):.3f}, "
+          f"survival {final.get('survival', float('nan')):.2f})", flush=True)
+    if args.video:
+        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4")
+        print(f"video: {out}", flush=True)
+
+
+def cli(argv: list[str] | None = None) -> None:
+    """Parse the command line and run :func:`main` with one-line errors (exit code 2)."""
+    argv = sys.argv[1:] if argv is None else argv
+    parser = parser_from_dataclass(TrainArgs, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.train")
+    ns = parser.parse_args(argv)
+    run_main(lambda: main(dataclass_from_args(TrainArgs, ns), _explicit_options(parser, argv)))
+
+
+if __name__ == "__main__":
+    cli()

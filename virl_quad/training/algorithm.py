@@ -1,0 +1,56 @@
+"""Algorithm 1 of VIRL on rsl-rl's PPO, without forking rsl-rl.
+
+``VirlPPO`` is named in the rsl-rl config (``algorithm.class_name``). The stock
+rollout loop calls ``act`` / ``process_env_step`` / ``compute_returns`` /
+``update``; this subclass adds, per iteration:
+
+1. while collecting: hand each step's agent and expert frames to the reward source
+   (``process_env_step``),
+2. before returns are computed: the reward source adds finished episodes to the
+   distance model's dataset, runs M model updates and recomputes the whole
+   rollout's rewards with the updated model (``compute_returns``),
+3. the recomputed rewards replace the stored ones, with rsl-rl's time-out
+   bootstrap (``+ gamma * V(s) * time_out``) applied again, then PPO as usual.
+"""
+
+from __future__ import annotations
+
+import torch
+from rsl_rl.algorithms import PPO
+from tensordict import TensorDict
+
+
+class VirlPPO(PPO):
+    """PPO whose rewards come from a :class:`~virl_quad.training.rewards.RolloutReward`."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.reward_source = None  # attached by the runner: needs the demonstration
+        self._time_outs: list[torch.Tensor] = []
+        self.last_reward_info: dict[str, float] = {}
+
+    def attach_reward(self, source) -> None:
+        """Set the reward source (see virl_quad.training.rewards)."""
+        self.reward_source = source
+
+    def process_env_step(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor,
+                         extras: dict) -> None:
+        """Record the step's frames for the reward, then store the transition as PPO does."""
+        if self.reward_source is None:
+            raise RuntimeError("VirlPPO needs a reward source: call attach_reward() before training")
+        self.reward_source.observe(obs, rewards, dones, extras)
+        self._time_outs.append(extras["time_outs"].to(self.device).float())
+        super().process_env_step(obs, rewards, dones, extras)
+
+    def compute_returns(self, obs: TensorDict) -> None:
+        """Update the distance model, recompute this rollout's rewards, then GAE as usual."""
+        st = self.storage
+        with torch.inference_mode(False), torch.enable_grad():
+            new_rewards, info = self.reward_source.finish()
+        new_rewards = new_rewards.to(self.device, torch.float32).reshape(st.rewards.shape)
+        time_outs = torch.stack(self._time_outs).reshape(st.rewards.shape)
+        self._time_outs = []
+        st.rewards.copy_(new_rewards + self.gamma * st.values * time_outs)
+        info["reward_mean"] = float(new_rewards.mean())
+        self.last_reward_info = info
+        super().compute_returns(obs)

@@ -1,0 +1,69 @@
+"""Atomic checkpoints that load with ``torch.load(weights_only=True)``.
+
+A checkpoint holds only tensors, numbers, strings, lists and dicts: policy and
+critic (with their observation normalisers), PPO optimiser, distance model and
+its optimiser, the training options, the iteration and the RNG states. It is
+written to a temporary file in the same folder and renamed over the old one,
+so a crash (even ``kill -9``) leaves the previous checkpoint intact.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+from pathlib import Path
+
+import numpy as np
+import torch
+
+LATEST = "checkpoint.pt"
+
+
+def rng_state() -> dict:
+    """RNG states of torch, numpy and Python, as weights-only-loadable values."""
+    kind, keys, pos, has_gauss, cached = np.random.get_state()
+    py = random.getstate()
+    return {
+        "torch": torch.get_rng_state(),
+        "numpy": {"kind": kind, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+                  "has_gauss": int(has_gauss), "cached": float(cached)},
+        "python": [py[0], list(py[1]), py[2]],
+    }
+
+
+def set_rng_state(state: dict) -> None:
+    """Restore what :func:`rng_state` captured."""
+    torch.set_rng_state(state["torch"])
+    n = state["numpy"]
+    np.random.set_state((n["kind"], n["keys"].numpy().astype(np.uint32), n["pos"], n["has_gauss"], n["cached"]))
+    p = state["python"]
+    random.setstate((p[0], tuple(p[1]), p[2]))
+
+
+def save(path: str | Path, payload: dict) -> Path:
+    """Write ``payload`` atomically (temporary file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    torch.save(payload, tmp)
+    with open(tmp, "rb") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    return path
+
+
+def load(path: str | Path) -> dict:
+    """Load a checkpoint (weights only). ValueError (one line) when missing or corrupt."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / LATEST
+    if not path.exists():
+        raise ValueError(f"no checkpoint at {path}")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated file, wrong format, ...
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"checkpoint {path} cannot be read ({first[:120]})") from None
+    if not isinstance(data, dict) or "actor_state_dict" not in data or "iteration" not in data:
+        raise ValueError(f"checkpoint {path} is not a virl_quad training checkpoint")
+    return data

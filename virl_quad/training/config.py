@@ -1,0 +1,96 @@
+"""Training options: one dataclass, one place for defaults, converted to rsl-rl's config dict.
+
+Defaults are chosen for a 2-core CPU machine; ``--device cuda`` moves PPO and the
+distance model to a GPU when there is one (the simulation stays on the CPU).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle")
+
+
+@dataclass
+class TrainArgs:
+    """Options of ``python -m virl_quad.train``."""
+
+    robot: str = "pupper"              # robot to train (pupper or laikago)
+    demo: str = "trot"                 # demonstration: built-in gait name, .npz, motion file (.txt/.json) or video file
+    reward: str = field(default="virl", metadata={"choices": REWARDS})  # reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, or oracle (ground-truth pose reward, an upper bound)
+    num_envs: int = 16                 # parallel simulated robots
+    num_workers: int = -1              # env worker processes (-1: one per CPU core)
+    iterations: int = 1000             # PPO iterations to run (an upper bound when --minutes is given)
+    minutes: float = 0.0               # wall-clock budget in minutes (0: no budget, run all iterations)
+    steps_per_env: int = 64            # env steps per env per iteration (rollout length)
+    seed: int = 0                      # seed of envs, networks and sampling
+    device: str = "cpu"                # torch device of PPO and the distance model (cpu or cuda)
+    run_dir: str = ""                  # output folder (default: runs/<robot>-<reward>-<date>)
+    resume: str = ""                   # run folder to continue from its latest checkpoint
+    save_every: int = 10               # write a checkpoint every N iterations
+    eval_every: int = 50               # ground-truth evaluation every N iterations (0: only at the end)
+    eval_episodes: int = 4             # episodes per evaluation (fixed seeds)
+    eval_seconds: float = 10.0         # s, length of an evaluation episode
+    episode_seconds: float = 10.0      # s, training episode time limit
+    randomize: bool = True             # domain randomisation during training
+    reward_updates: int = 8            # distance-model batch updates per iteration (M in Algorithm 1)
+    learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
+    entropy_coef: float = 0.005        # PPO entropy bonus
+    init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
+    hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
+    video: bool = True                 # write the final side-by-side video (demonstration | agent)
+
+
+def validate(args: TrainArgs) -> None:
+    """Raise ValueError (one line) for inconsistent options."""
+    from virl_quad import robots
+
+    robots.get(args.robot)
+    if args.reward not in REWARDS:
+        raise ValueError(f"unknown reward {args.reward!r}; choose one of: {', '.join(REWARDS)}")
+    for name in ("num_envs", "iterations", "steps_per_env", "save_every"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
+    if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
+        raise ValueError("--minutes must be >= 0 and episode/eval seconds > 0")
+    hidden_sizes(args)
+
+
+def hidden_sizes(args: TrainArgs) -> list[int]:
+    """Parse ``--hidden`` ("256,128") into layer sizes."""
+    try:
+        sizes = [int(s) for s in args.hidden.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"--hidden must be comma-separated integers, got {args.hidden!r}") from None
+    if not sizes or min(sizes) < 1:
+        raise ValueError(f"--hidden must list positive sizes, got {args.hidden!r}")
+    return sizes
+
+
+def rsl_rl_config(args: TrainArgs) -> dict:
+    """The rsl-rl 5.x train config dict for these options."""
+    hidden = hidden_sizes(args)
+    model = {"class_name": "MLPModel", "hidden_dims": hidden, "activation": "elu"}
+    return {
+        "num_steps_per_env": args.steps_per_env,
+        "save_interval": args.save_every,
+        "check_for_nan": True,
+        "obs_groups": {"actor": ["policy"], "critic": ["policy", "privileged"]},
+        "actor": {**model, "obs_normalization": True,
+                  "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": args.init_std,
+                                       "std_type": "scalar"}},
+        "critic": {**model, "obs_normalization": True},
+        "algorithm": {
+            "class_name": "virl_quad.training.algorithm:VirlPPO",
+            "num_learning_epochs": 5, "num_mini_batches": 4, "clip_param": 0.2,
+            "gamma": 0.99, "lam": 0.95, "value_loss_coef": 1.0, "entropy_coef": args.entropy_coef,
+            "learning_rate": args.learning_rate, "max_grad_norm": 1.0, "schedule": "adaptive",
+            "desired_kl": 0.01, "use_clipped_value_loss": True,
+        },
+    }
+
+
+def to_dict(args: TrainArgs) -> dict:
+    """Plain dict of the options (for checkpoints, report.json, metadata)."""
+    return dataclasses.asdict(args)

@@ -1,0 +1,103 @@
+"""Reward sources for :class:`~virl_quad.training.algorithm.VirlPPO`.
+
+A source sees every step of a rollout (``observe``) and, once it is complete,
+returns the rollout's rewards [T, N] (``finish``):
+
+- :class:`LearnedReward`: the VIRL distance or one of its baselines/ablations
+  (``virl``, ``frame``, ``sequence``, ``no_ae``, ``gaifo``): stores the rollout's
+  agent/expert frames in the distance model's dataset, runs M updates, then
+  recomputes every reward of the rollout with the updated model;
+- :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
+  pose-imitation reward, the upper bound of the comparison).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from virl_quad.reward import RewardConfig, build_reward
+
+
+def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    """The agent and expert frames each env produced this step, [N, 48, 48] uint8.
+
+    For an env whose episode just ended, ``obs`` already holds the next episode's
+    first frame, so its last frame comes from ``extras["final_*"]``.
+    """
+    d = dones.bool().view(-1, 1, 1)
+    agent = torch.where(d, extras["final_agent_image"], obs["agent_image"])
+    expert = torch.where(d, extras["final_expert_image"], obs["expert_image"])
+    return agent, expert
+
+
+class LearnedReward:
+    """Algorithm 1's reward: a distance model trained online beside the policy."""
+
+    def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
+                 device: str = "cpu", other_clips: list[np.ndarray] | None = None) -> None:
+        self.model = build_reward(RewardConfig(variant=variant), demo_frames, other_clips, seed, device)
+        self.updates = updates
+        self.num_envs = num_envs
+        self.state = self.model.stream_state(num_envs)
+        self._agent: list[torch.Tensor] = []
+        self._expert: list[torch.Tensor] = []
+        self._dones: list[torch.Tensor] = []
+
+    def observe(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
+        """Keep this step's frames and episode ends."""
+        agent, expert = step_frames(obs, dones, extras)
+        self._agent.append(agent.cpu())
+        self._expert.append(expert.cpu())
+        self._dones.append(dones.bool().cpu())
+
+    def finish(self) -> tuple[torch.Tensor, dict[str, float]]:
+        """Dataset <- rollout; M model updates; rewards [T, N] recomputed with the updated model."""
+        agent, expert, dones = torch.stack(self._agent), torch.stack(self._expert), torch.stack(self._dones)
+        self._agent, self._expert, self._dones = [], [], []
+        t0 = time.perf_counter()
+        self.model.add_rollout(agent, expert, dones)
+        info = {f"distance/{k}": float(v) for k, v in self.model.update(self.updates).items()}
+        t1 = time.perf_counter()
+        # The rollout starts from the state the last one ended in (computed with the previous
+        # weights); envs whose episode ended on the last step start fresh.
+        rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
+        self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
+        info["time/distance_update_s"] = t1 - t0
+        info["time/reward_recompute_s"] = time.perf_counter() - t1
+        return rewards, info
+
+    def state_dict(self) -> dict:
+        """Distance model and optimiser (weights-only loadable)."""
+        return self.model.state_dict()
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore the distance model and optimiser."""
+        self.model.load_state_dict(d)
+
+
+class EnvReward:
+    """Rewards computed by the env itself (the oracle pose reward)."""
+
+    def __init__(self) -> None:
+        self._rewards: list[torch.Tensor] = []
+
+    def observe(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
+        """Keep the env's reward of this step."""
+        self._rewards.append(rewards.detach().float().cpu().clone())
+
+    def finish(self) -> tuple[torch.Tensor, dict[str, float]]:
+        """The rollout's env rewards [T, N]."""
+        r = torch.stack(self._rewards)
+        self._rewards = []
+        return r, {}
+
+    def state_dict(self) -> dict:
+        """Nothing to save."""
+        return {}
+
+    def load_state_dict(self, d: dict) -> None:
+        """Nothing to restore."""

@@ -1,0 +1,167 @@
+"""A thin rsl-rl runner: the stock construction, our own iteration loop around the same PPO calls.
+
+Per iteration: rollout (``alg.act`` -> ``env.step`` -> ``alg.process_env_step``),
+``alg.compute_returns`` (where VirlPPO updates the distance model and recomputes
+rewards), ``alg.update``; then one progress line, TensorBoard scalars, a
+checkpoint every ``save_every`` iterations and a ground-truth evaluation every
+``eval_every``. Ctrl-C writes a checkpoint before leaving.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from rsl_rl.runners import OnPolicyRunner
+from tensordict import TensorDict
+
+from virl_quad.training import checkpoint
+
+
+def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
+    """Wrap an rsl-rl actor as ``obs dict -> action`` (deterministic mean, numpy)."""
+    def act(obs: dict) -> np.ndarray:
+        x = torch.as_tensor(obs["policy"], dtype=torch.float32).reshape(1, -1)
+        with torch.inference_mode():
+            out = actor(TensorDict({"policy": x}, batch_size=[1]))
+        return out[0].cpu().numpy().astype(np.float64)
+    return act
+
+
+class VirlRunner(OnPolicyRunner):
+    """OnPolicyRunner with progress lines, atomic checkpoints and ground-truth evaluation."""
+
+    def __init__(self, env, train_cfg: dict, reward_source, run_dir: Path, config: dict,
+                 evaluate: Callable[[Callable], dict] | None = None, device: str = "cpu") -> None:
+        super().__init__(env, train_cfg, log_dir=None, device=device)
+        self.alg.attach_reward(reward_source)
+        self.reward_source = reward_source
+        self.run_dir = Path(run_dir)
+        self.config = config
+        self.evaluate_fn = evaluate
+        self.env_steps = 0
+        self.wall_time = 0.0
+        self.last_eval: dict = {}
+        self.writer = None
+        self._episode_len = torch.zeros(env.num_envs)
+        self._finished_lengths: list[float] = []
+
+    # -- checkpoints --------------------------------------------------------------------------
+    def checkpoint_payload(self) -> dict:
+        """Everything needed to continue: networks, optimisers, normalisers, reward model, RNG."""
+        return {**self.alg.save(), "reward": self.reward_source.state_dict(), "config": self.config,
+                "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
+                "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval}
+
+    def save_checkpoint(self) -> Path:
+        """Write ``checkpoint.pt`` atomically in the run folder."""
+        return checkpoint.save(self.run_dir / checkpoint.LATEST, self.checkpoint_payload())
+
+    def restore(self, data: dict) -> None:
+        """Continue from a loaded checkpoint (see :func:`virl_quad.training.checkpoint.load`)."""
+        self.alg.load(data, None, strict=True)
+        self.reward_source.load_state_dict(data["reward"])
+        self.current_learning_iteration = int(data["iteration"])
+        self.env_steps = int(data["env_steps"])
+        self.wall_time = float(data["wall_time"])
+        self.last_eval = dict(data.get("last_eval") or {})
+        checkpoint.set_rng_state(data["rng"])
+
+    # -- the loop -----------------------------------------------------------------------------
+    def train(self, iterations: int, minutes: float = 0.0, save_every: int = 10, eval_every: int = 0,
+              log: Callable[[str], None] = print) -> None:
+        """Run until ``iterations`` in total are done or ``minutes`` of wall time have passed."""
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(str(self.run_dir / "tensorboard"))
+        start_wall, start_it = time.time(), self.current_learning_iteration
+        obs = self.env.get_observations().to(self.device)
+        self.alg.train_mode()
+        try:
+            while self.current_learning_iteration < iterations:
+                t0 = time.time()
+                obs = self._rollout(obs)
+                t1 = time.time()
+                with torch.inference_mode():
+                    self.alg.compute_returns(obs)
+                t2 = time.time()
+                losses = self.alg.update()
+                t3 = time.time()
+                self.current_learning_iteration += 1
+                self.wall_time += t3 - t0
+                it = self.current_learning_iteration
+                if eval_every and it % eval_every == 0:
+                    self.run_evaluation()
+                self._report(it, iterations, losses, (t1 - t0, t2 - t1, t3 - t2), start_wall, start_it, log)
+                if it % save_every == 0:
+                    self.save_checkpoint()
+                if minutes and time.time() - start_wall >= 60 * minutes:
+                    log(f"time budget of {minutes:g} min reached after iteration {it}")
+                    break
+        except KeyboardInterrupt:
+            self.save_checkpoint()
+            log(f"interrupted: checkpoint written at iteration {self.current_learning_iteration}")
+            raise
+        finally:
+            self.writer.close()
+        self.save_checkpoint()
+
+    def _rollout(self, obs: TensorDict) -> TensorDict:
+        with torch.inference_mode():
+            for _ in range(self.cfg["num_steps_per_env"]):
+                actions = self.alg.act(obs)
+                obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
+                obs, rewards, dones = obs.to(self.device), rewards.to(self.device), dones.to(self.device)
+                self.alg.process_env_step(obs, rewards, dones, extras)
+                self._episode_len += 1
+                ended = dones.cpu().bool()
+                self._finished_lengths += self._episode_len[ended].tolist()
+                self._episode_len[ended] = 0
+        self.env_steps += self.cfg["num_steps_per_env"] * self.env.num_envs
+        return obs
+
+    def run_evaluation(self) -> dict:
+        """Ground-truth imitation score of the current deterministic policy (if an evaluator is set)."""
+        if self.evaluate_fn is None:
+            return {}
+        self.alg.eval_mode()
+        try:
+            result = self.evaluate_fn(actor_policy(self.alg.get_policy()))
+        finally:
+            self.alg.train_mode()
+        self.last_eval = {"iteration": self.current_learning_iteration,
+                          **{k: float(v) for k, v in result.items() if isinstance(v, (int, float))}}
+        for k, v in self.last_eval.items():
+            self.writer.add_scalar(f"eval/{k}", v, self.current_learning_iteration)
+        return self.last_eval
+
+    def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
+                log: Callable[[str], None]) -> None:
+        info = self.alg.last_reward_info
+        rollout, returns, update = phases
+        n = self.cfg["num_steps_per_env"] * self.env.num_envs
+        sps = n / max(sum(phases), 1e-9)
+        dt = self.env.spec.control_dt
+        ep_len = float(np.mean(self._finished_lengths)) * dt if self._finished_lengths else float("nan")
+        self._finished_lengths = self._finished_lengths[-200:]
+        per_it = (time.time() - start_wall) / max(it - start_it, 1)
+        eta = per_it * (total - it)
+        score = self.last_eval.get("total")
+        score_txt = f"{score:.3f}@{self.last_eval['iteration']}" if score is not None else "-"
+        dist = info.get("distance/total", float("nan"))
+        log(f"it {it:5d}/{total} | steps {self.env_steps:9,d} | {sps:6.0f} st/s | reward {info['reward_mean']:.3f}"
+            f" | dist-loss {dist:.4f} | ep-len {ep_len:5.2f}s | score {score_txt} | ETA {eta / 60:5.1f} min")
+        w = self.writer
+        w.add_scalar("train/reward_mean", info["reward_mean"], it)
+        w.add_scalar("train/episode_seconds", ep_len, it)
+        w.add_scalar("train/steps_per_second", sps, it)
+        w.add_scalar("train/env_steps", self.env_steps, it)
+        w.add_scalar("time/rollout_s", rollout, it)
+        w.add_scalar("time/reward_and_returns_s", returns, it)
+        w.add_scalar("time/ppo_update_s", update, it)
+        w.add_scalar("policy/action_std", float(self.alg.get_policy().output_std.mean()), it)
+        for k, v in {**losses, **info}.items():
+            w.add_scalar(f"loss/{k}", float(v), it)
