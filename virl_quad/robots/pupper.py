@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from virl_quad.robots.spec import LEGS, ROBOTS_DIR, RobotSpec, per_leg
 
 SPEC = RobotSpec(
@@ -37,6 +35,3 @@ SPEC = RobotSpec(
     camera_pitch=-15.0,                                 # deg
     notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
 )
-
-#: Joints mirrored between left and right legs have opposite abduction signs.
-MIRROR_SIGN = np.array([1.0, 1.0, 1.0] * 4)

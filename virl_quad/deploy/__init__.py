@@ -1,0 +1,31 @@
+"""Deployment: wire protocol, safety layer, robot backends and Zenoh configuration.
+
+- :mod:`virl_quad.deploy.protocol`     message layouts, key expressions (``deploy/PROTOCOL.md``)
+- :mod:`virl_quad.deploy.safety`       IDLE -> RAMP -> ACTIVE -> DAMPING, command validation
+- :mod:`virl_quad.deploy.backends`     ``Backend`` interface, ``get_backend(name, **kw)``
+- :mod:`virl_quad.deploy.zenoh_config` ``load_config("peer" | "secure" | ..., listen=, connect=)``
+
+Importing this package does not import zenoh or pyserial.
+"""
+
+from virl_quad.deploy.protocol import (
+    JointCommand,
+    Message,
+    MsgType,
+    ProtocolError,
+    RobotState,
+    SeqCounter,
+    decode,
+    encode_command,
+    encode_json,
+    encode_state,
+    key,
+    liveliness_key,
+)
+from virl_quad.deploy.safety import Mode, SafetyConfig, SafetyController, is_safe_command
+
+__all__ = [
+    "JointCommand", "Message", "MsgType", "ProtocolError", "RobotState", "SeqCounter", "decode", "encode_command",
+    "encode_json", "encode_state", "key", "liveliness_key",
+    "Mode", "SafetyConfig", "SafetyController", "is_safe_command",
+]

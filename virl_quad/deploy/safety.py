@@ -1,0 +1,348 @@
+"""Host-side safety layer: the only path from a policy's command to a motor.
+
+Pure logic, no Zenoh, no policy, no clock: the HAL's control loop calls
+:meth:`SafetyController.tick` once per control period with the latest
+measured state and applies the :class:`JointCommand` it returns. Commands
+arrive through :meth:`SafetyController.receive` (raw protocol bytes) at any
+time, from any thread.
+
+Modes::
+
+    IDLE ──arm()──> RAMP ──ramp done + fresh valid command──> ACTIVE
+      (zero torque)  (PD to default pose over ramp_time)      (validated policy commands)
+    any powered mode ──E-stop / tilt / bad state / watchdog──> DAMPING ──arm()──> RAMP
+
+DAMPING (kp = 0, kd = damping gains, no feed-forward) is latched: only an
+explicit :meth:`SafetyController.arm` leaves it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import Counter
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+from virl_quad.deploy.protocol import NUM_JOINTS, JointCommand, MsgType, ProtocolError, RobotState, decode
+
+_EPS = 1e-9
+
+
+def _copy(c: JointCommand) -> JointCommand:
+    ref = getattr(c, "ref_seq", 0)
+    return JointCommand(*(np.array(a, dtype=np.float64) for a in (c.q_target, c.kp, c.kd, c.tau_ff)),
+                        ref_seq=int(ref) if isinstance(ref, (int, np.integer)) and ref >= 0 else 0)
+
+
+class Mode(str, Enum):
+    """Safety state machine modes."""
+
+    IDLE = "IDLE"
+    RAMP = "RAMP"
+    ACTIVE = "ACTIVE"
+    DAMPING = "DAMPING"
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Tunables of the safety layer (the watchdog and the step limit count control periods)."""
+
+    ramp_time: float = 2.0             # s, from the current pose to the default pose
+    watchdog_periods: int = 3          # ACTIVE: more periods than this without a valid command -> DAMPING
+    max_step: float = 0.2              # rad per control period, change of an applied target
+    gain_factor: float = 2.0           # kp, kd at most gain_factor x the spec gains
+    damping_kd_factor: float = 1.0     # DAMPING kd = damping_kd_factor x spec kd (<= gain_factor)
+    tilt_factor: float = 1.0           # fault beyond tilt_factor x spec max_roll / max_pitch
+
+    def __post_init__(self) -> None:
+        if self.ramp_time <= 0 or self.watchdog_periods < 1 or self.max_step <= 0:
+            raise ValueError("ramp_time, watchdog_periods and max_step must be positive")
+        if not 0 <= self.damping_kd_factor <= self.gain_factor:
+            raise ValueError("damping_kd_factor must lie in [0, gain_factor]")
+        if self.tilt_factor <= 0:
+            raise ValueError("tilt_factor must be positive")
+
+
+def roll_pitch(quat_xyzw: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch (rad, ZYX Euler) of a quaternion (x, y, z, w); normalises it first."""
+    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64) / np.linalg.norm(quat_xyzw)
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    return roll, pitch
+
+
+def is_safe_command(cmd: JointCommand, spec: Any, config: SafetyConfig = SafetyConfig(),
+                    prev: JointCommand | None = None) -> bool:
+    """True if ``cmd`` may reach a motor: finite, 12 values each, targets within the joint
+    limits, 0 <= kp, kd <= gain_factor x spec gains, |tau_ff| <= torque limit, and (if
+    ``prev`` is given) no target moved more than ``config.max_step`` rad since ``prev``."""
+    try:
+        arrays = [np.asarray(a, dtype=np.float64) for a in (cmd.q_target, cmd.kp, cmd.kd, cmd.tau_ff)]
+    except (TypeError, ValueError):
+        return False
+    if any(a.shape != (NUM_JOINTS,) or not np.all(np.isfinite(a)) for a in arrays):
+        return False
+    q, kp, kd, tau = arrays
+    ok = (np.all(q >= spec.joint_lower - _EPS) and np.all(q <= spec.joint_upper + _EPS)
+          and np.all(kp >= 0) and np.all(kp <= config.gain_factor * spec.kp + _EPS)
+          and np.all(kd >= 0) and np.all(kd <= config.gain_factor * spec.kd + _EPS)
+          and np.all(np.abs(tau) <= spec.torque_limit + _EPS))
+    if ok and prev is not None:
+        ok = bool(np.all(np.abs(q - np.asarray(prev.q_target)) <= config.max_step + _EPS))
+    return bool(ok)
+
+
+class SafetyController:
+    """State machine + command validator for one robot (see the module docstring)."""
+
+    def __init__(self, spec: Any, config: SafetyConfig = SafetyConfig()) -> None:
+        self.spec = spec
+        self.config = config
+        self.mode = Mode.IDLE
+        self.fault: str = ""                      # why the last DAMPING was entered
+        self.ticks = 0                            # tick() calls so far
+        self.rejected: Counter[str] = Counter()   # command rejections by reason
+        self.clamped: Counter[str] = Counter()    # accepted commands modified, by kind
+        self.events: Counter[str] = Counter()     # estop, tilt, watchdog, bad_state, arm, ...
+        self.rejected_other: Counter[str] = Counter()  # bad ESTOP / ARM messages, "arm:bad_crc" etc.
+        self.accepted = 0                         # commands that passed receive()
+        self.applied = 0                          # ACTIVE ticks that applied a new command
+        self._lock = threading.Lock()
+        self._last_seq: int | None = None         # newest accepted sequence number
+        self._pending: JointCommand | None = None  # newest accepted, not yet consumed by tick()
+        self._since_valid = 0                     # ticks since a valid command was consumed
+        self._ramp_k = 0
+        self._ramp_n = max(1, round(config.ramp_time / spec.control_dt))
+        self._ramp_start = np.array(spec.default_pose, dtype=np.float64)
+        self._last: JointCommand = self._zero_torque(np.array(spec.default_pose, dtype=np.float64))
+        # the q_target of IDLE/DAMPING commands is irrelevant to the motor (kp = 0) but is kept
+        # within the joint limits so that every output passes is_safe_command
+        self._arm_pending = False
+        self._estop_pending = ""
+
+    # ------------------------------------------------------------------ inputs (any thread)
+
+    def receive(self, data: Any) -> bool:
+        """Decode and validate one COMMAND message (bytes or zenoh.ZBytes from the cmd key).
+        Returns True if accepted; otherwise counts the rejection reason. Never raises."""
+        try:
+            msg = decode(data, expect=MsgType.COMMAND)
+        except ProtocolError as e:
+            with self._lock:
+                self.rejected[e.reason] += 1
+            return False
+        return self.receive_command(msg.body, msg.seq)  # type: ignore[arg-type]
+
+    def receive_command(self, cmd: JointCommand, seq: int) -> bool:
+        """Validate an already-decoded command (in-process policies use this). Never raises."""
+        reason = self._content_error(cmd)
+        if reason is None and (isinstance(seq, bool) or not isinstance(seq, (int, np.integer)) or seq < 0):
+            reason = "bad_seq"
+        with self._lock:
+            if reason is None and self._last_seq is not None and seq <= self._last_seq:
+                reason = "stale_seq"
+            if reason is not None:
+                self.rejected[reason] += 1
+                return False
+            self._last_seq = int(seq)
+            self._pending = _copy(cmd)
+            self.accepted += 1
+            return True
+
+    def receive_estop(self, data: Any) -> None:
+        """Handle a sample from the estop key: E-stop whatever the payload (fail-safe);
+        a payload that does not decode as ESTOP is counted. Never raises."""
+        reason = "estop"
+        try:
+            body = decode(data, expect=MsgType.ESTOP).body
+            if isinstance(body, dict) and isinstance(body.get("reason"), str) and body["reason"]:
+                reason = f"estop: {body['reason'][:80]}"
+        except ProtocolError as e:
+            with self._lock:
+                self.rejected_other[f"estop:{e.reason}"] += 1
+        self.estop(reason)
+
+    def receive_arm(self, data: Any, robot_id: str) -> bool:
+        """Handle a sample from the arm key: re-arm only for a valid ARM message naming
+        ``robot_id``; anything else is counted and ignored. Never raises."""
+        try:
+            body = decode(data, expect=MsgType.ARM).body
+        except ProtocolError as e:
+            with self._lock:
+                self.rejected_other[f"arm:{e.reason}"] += 1
+            return False
+        if not isinstance(body, dict) or body.get("robot_id") != robot_id:
+            with self._lock:
+                self.rejected_other["arm:wrong_robot"] += 1
+            return False
+        return self.arm()
+
+    def estop(self, reason: str = "estop") -> None:
+        """Request an emergency stop: DAMPING from the next tick on, latched until arm()."""
+        with self._lock:
+            self._estop_pending = reason or "estop"
+
+    def arm(self) -> bool:
+        """Request (re-)arming: IDLE or DAMPING -> RAMP on the next tick. Returns False (and
+        does nothing) in RAMP or ACTIVE. Resets the sequence baseline: a restarted policy
+        may begin again from any sequence number."""
+        with self._lock:
+            if self.mode in (Mode.RAMP, Mode.ACTIVE):
+                self.events["arm_ignored"] += 1
+                return False
+            self._arm_pending = True
+            return True
+
+    # ------------------------------------------------------------------ the control tick
+
+    def tick(self, state: RobotState | None) -> JointCommand:
+        """Advance one control period and return the command to apply now (always safe).
+
+        ``state`` is the latest measurement; pass None when the backend could not read one
+        (in RAMP or ACTIVE that is a fault: DAMPING). Never raises on bad input."""
+        with self._lock:
+            self.ticks += 1
+            pending, self._pending = self._pending, None
+            q_meas = self._safe_q(getattr(state, "q", None), fallback=self._last.q_target)
+            if self._estop_pending:
+                self._enter_damping(self._estop_pending, "estop")
+                self._estop_pending = ""
+                self._arm_pending = False
+            elif self._arm_pending:
+                self._arm_pending = False
+                self.events["arm"] += 1
+                self._last_seq = None
+                self.fault = ""
+                self.mode = Mode.RAMP
+                self._ramp_k = 0
+                self._ramp_start = q_meas
+            if self.mode in (Mode.RAMP, Mode.ACTIVE):
+                fault = self._state_fault(state)
+                if fault:
+                    self._enter_damping(fault, fault)
+            self._since_valid = 0 if pending is not None else self._since_valid + 1
+            if self.mode == Mode.RAMP:
+                out = self._ramp_step(pending)
+            elif self.mode == Mode.ACTIVE:
+                out = self._active_step(pending)
+            elif self.mode == Mode.DAMPING:
+                out = self._damping(q_meas)
+            else:
+                out = self._zero_torque(q_meas)
+            self._last = out
+            return _copy(out)
+
+    def _ramp_step(self, pending: JointCommand | None) -> JointCommand:
+        s = self.spec
+        self._ramp_k = min(self._ramp_k + 1, self._ramp_n)
+        a = self._ramp_k / self._ramp_n
+        q = self._ramp_start + a * (np.asarray(s.default_pose) - self._ramp_start)
+        out = JointCommand(np.clip(q, s.joint_lower, s.joint_upper), np.array(s.kp, dtype=np.float64),
+                           np.array(s.kd, dtype=np.float64), np.zeros(NUM_JOINTS))
+        if self._ramp_k >= self._ramp_n and pending is not None:
+            self.mode = Mode.ACTIVE            # the policy is live: its next command is applied
+            self.events["active"] += 1
+        return out
+
+    def _active_step(self, pending: JointCommand | None) -> JointCommand:
+        if pending is None:
+            if self._since_valid > self.config.watchdog_periods:
+                self._enter_damping("watchdog", "watchdog")
+                return self._damping(self._last.q_target)
+            return self._last                  # hold the last applied command (tick() copies it)
+        self.applied += 1
+        return self._limit(pending)
+
+    def _limit(self, cmd: JointCommand) -> JointCommand:
+        s, c = self.spec, self.config
+        q = np.clip(cmd.q_target, s.joint_lower, s.joint_upper)
+        if np.any(q != cmd.q_target):
+            self.clamped["q_limit"] += 1
+        prev = self._last.q_target
+        q_step = np.clip(q, prev - c.max_step, prev + c.max_step)
+        if np.any(q_step != q):
+            self.clamped["q_step"] += 1
+        q = np.clip(q_step, s.joint_lower, s.joint_upper)
+        kp = np.minimum(cmd.kp, c.gain_factor * s.kp)
+        kd = np.minimum(cmd.kd, c.gain_factor * s.kd)
+        if np.any(kp != cmd.kp) or np.any(kd != cmd.kd):
+            self.clamped["gain"] += 1
+        tau = np.clip(cmd.tau_ff, -s.torque_limit, s.torque_limit)
+        if np.any(tau != cmd.tau_ff):
+            self.clamped["tau_ff"] += 1
+        return JointCommand(q, kp, kd, tau, ref_seq=cmd.ref_seq)
+
+    # ------------------------------------------------------------------ helpers
+
+    def _content_error(self, cmd: JointCommand) -> str | None:
+        try:
+            arrays = [np.asarray(a, dtype=np.float64) for a in (cmd.q_target, cmd.kp, cmd.kd, cmd.tau_ff)]
+        except (TypeError, ValueError, AttributeError):
+            return "bad_shape"
+        if any(a.shape != (NUM_JOINTS,) for a in arrays):
+            return "bad_shape"
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            return "non_finite"
+        if np.any(arrays[1] < 0) or np.any(arrays[2] < 0):
+            return "negative_gain"
+        return None
+
+    def _state_fault(self, state: RobotState | None) -> str:
+        if state is None:
+            return "no_state"
+        try:
+            q = np.asarray(state.q, dtype=np.float64)
+            quat = np.asarray(state.quat, dtype=np.float64)
+            if q.shape != (NUM_JOINTS,) or quat.shape != (4,):
+                return "bad_state"
+            if not (np.all(np.isfinite(q)) and np.all(np.isfinite(state.dq)) and np.all(np.isfinite(quat))):
+                return "bad_state"
+            if not 0.5 < float(np.linalg.norm(quat)) < 1.5:
+                return "bad_state"
+            roll, pitch = roll_pitch(quat)
+        except (TypeError, ValueError, AttributeError):
+            return "bad_state"
+        tf = self.config.tilt_factor
+        if abs(roll) > tf * self.spec.max_roll or abs(pitch) > tf * self.spec.max_pitch:
+            return "tilt"
+        return ""
+
+    def _enter_damping(self, fault: str, event: str) -> None:
+        if self.mode != Mode.DAMPING:
+            self.fault = fault
+        self.events[event] += 1
+        self.mode = Mode.DAMPING
+
+    def _safe_q(self, q: Any, fallback: np.ndarray | None = None) -> np.ndarray:
+        """``q`` clipped to the joint limits if it is 12 finite values, else ``fallback``
+        (or the default pose)."""
+        try:
+            a = np.asarray(q, dtype=np.float64)
+            if a.shape == (NUM_JOINTS,) and np.all(np.isfinite(a)):
+                return np.clip(a, self.spec.joint_lower, self.spec.joint_upper)
+        except (TypeError, ValueError):
+            pass
+        return np.array(self.spec.default_pose if fallback is None else fallback, dtype=np.float64)
+
+    def _zero_torque(self, q: np.ndarray) -> JointCommand:
+        z = np.zeros(NUM_JOINTS)
+        return JointCommand(np.array(q, dtype=np.float64), z, z.copy(), z.copy())
+
+    def _damping(self, q: np.ndarray) -> JointCommand:
+        kd = self.config.damping_kd_factor * np.asarray(self.spec.kd, dtype=np.float64)
+        return JointCommand(np.array(q, dtype=np.float64), np.zeros(NUM_JOINTS), kd, np.zeros(NUM_JOINTS))
+
+    def status(self) -> dict[str, Any]:
+        """Counters and mode, JSON-ready: the body of a STATUS message."""
+        with self._lock:
+            return {
+                "mode": self.mode.value, "fault": self.fault, "ticks": self.ticks,
+                "accepted": self.accepted, "applied": self.applied,
+                "rejected": dict(self.rejected), "clamped": dict(self.clamped), "events": dict(self.events),
+                "rejected_other": dict(self.rejected_other),
+                "last_seq": self._last_seq,
+            }

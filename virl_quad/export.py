@@ -1,0 +1,96 @@
+"""Export a trained run to a TorchScript policy with metadata (and ONNX when it is one call away).
+
+    python -m virl_quad.export runs/pupper-virl-... --out policies/pupper_trot.pt
+
+Writes ``NAME.pt`` (observation normaliser baked in, deterministic mean action),
+``NAME.json`` (see :mod:`virl_quad.policy_io`) and, with ``--onnx``, ``NAME.onnx``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import torch
+from rsl_rl.models import MLPModel
+from tensordict import TensorDict
+
+from virl_quad import robots
+from virl_quad.cli import UserError, run_main
+from virl_quad.envs import observation as obs_lib
+from virl_quad.envs.quadruped import EnvConfig
+from virl_quad.policy_io import metadata_for, save_policy
+from virl_quad.training import checkpoint
+from virl_quad.training.config import TrainArgs, hidden_sizes, rsl_rl_config
+
+
+def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs]:
+    """Rebuild the rsl-rl actor of a checkpoint (eval mode)."""
+    args = TrainArgs(**data["config"])
+    hidden_sizes(args)
+    n = obs_lib.policy_size(with_phase=True)
+    obs = TensorDict({"policy": torch.zeros(1, n)}, batch_size=[1])
+    cfg = rsl_rl_config(args)["actor"]
+    cfg.pop("class_name")
+    actor = MLPModel(obs, {"actor": ["policy"]}, "actor", 12, **cfg)
+    try:
+        actor.load_state_dict(data["actor_state_dict"])
+    except RuntimeError as exc:
+        raise UserError(f"checkpoint actor does not match its config ({str(exc).splitlines()[0][:100]})") from None
+    return actor.eval(), args
+
+
+def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
+    """Export the run in ``run_dir`` to ``out`` (``.pt``); returns the path written."""
+    run_dir, out = Path(run_dir), Path(out)
+    if out.suffix != ".pt":
+        raise UserError(f"--out must end in .pt, got {out}")
+    data = checkpoint.load(run_dir)
+    actor, args = actor_from_checkpoint(data)
+    spec = robots.get(args.robot)
+    scripted = torch.jit.script(actor.as_jit())
+    report = run_dir / "report.json"
+    scores = json.loads(report.read_text()).get("evaluation", {}) if report.exists() else {}
+    demo_meta = {"source": args.demo}
+    demo_file = run_dir / "demo.npz"
+    if demo_file.exists():
+        from virl_quad.demo.render import load_npz
+
+        d = load_npz(demo_file)
+        demo_meta.update({"source": d.source or args.demo, "robot": d.robot, "fps": d.fps,
+                          "num_frames": d.num_frames, "has_motion": d.motion is not None})
+    meta = metadata_for(spec, with_phase=True, action_scale=spec.action_scale,
+                        action_clip=EnvConfig().action_clip, demo=demo_meta, scores=scores)
+    meta.update({"reward": args.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])})
+    save_policy(scripted, meta, out)
+    if onnx:
+        _export_onnx(actor, out.with_suffix(".onnx"))
+    return out
+
+
+def _export_onnx(actor: MLPModel, path: Path) -> None:
+    model = actor.as_onnx(verbose=False).eval()
+    try:
+        torch.onnx.export(model, model.get_dummy_inputs(), str(path), input_names=model.input_names,
+                          output_names=model.output_names, opset_version=18)
+    except Exception as exc:  # onnx / onnxscript not installed, or an exporter limitation
+        raise UserError(f"ONNX export failed ({str(exc).splitlines()[0][:120]}); "
+                        "install the extra: pip install -e '.[onnx]'") from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line entry."""
+    parser = argparse.ArgumentParser(prog="python -m virl_quad.export", description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", help="training run folder (holds checkpoint.pt)")
+    parser.add_argument("--out", required=True, help="output policy path, e.g. policies/pupper_trot.pt")
+    parser.add_argument("--onnx", action="store_true", help="also write NAME.onnx")
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    path = export(args.run_dir, args.out, args.onnx)
+    print(f"exported {path} and {path.with_suffix('.json')}")
+    return 0
+
+
+if __name__ == "__main__":
+    run_main(main)
