@@ -42,15 +42,38 @@ def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs]:
     return actor.eval(), args
 
 
-def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
-    """Export the run in ``run_dir`` to ``out`` (``.pt``); returns the path written."""
-    run_dir, out = Path(run_dir), Path(out)
+def fresh_actor(hidden: list[int] | tuple[int, ...] = (256, 128), seed: int = 0) -> MLPModel:
+    """An untrained actor with the training architecture (for tests and dry runs)."""
+    torch.manual_seed(seed)
+    args = TrainArgs(hidden=",".join(str(h) for h in hidden))
+    obs = TensorDict({"policy": torch.zeros(1, obs_lib.policy_size(with_phase=True))}, batch_size=[1])
+    cfg = rsl_rl_config(args)["actor"]
+    cfg.pop("class_name")
+    return MLPModel(obs, {"actor": ["policy"]}, "actor", 12, **cfg).eval()
+
+
+def export_actor(actor: MLPModel, robot: str, out: str | Path, demo: dict | None = None,
+                 scores: dict | None = None, extra: dict | None = None, onnx: bool = False) -> Path:
+    """Script ``actor`` and write ``out`` (.pt) with its metadata (and ONNX on request)."""
+    out = Path(out)
     if out.suffix != ".pt":
         raise UserError(f"--out must end in .pt, got {out}")
+    spec = robots.get(robot)
+    scripted = torch.jit.script(actor.as_jit())
+    meta = metadata_for(spec, with_phase=True, action_scale=spec.action_scale,
+                        action_clip=EnvConfig().action_clip, demo=demo, scores=scores)
+    meta.update(extra or {})
+    save_policy(scripted, meta, out)
+    if onnx:
+        _export_onnx(actor, out.with_suffix(".onnx"))
+    return out
+
+
+def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
+    """Export the run in ``run_dir`` to ``out`` (``.pt``); returns the path written."""
+    run_dir = Path(run_dir)
     data = checkpoint.load(run_dir)
     actor, args = actor_from_checkpoint(data)
-    spec = robots.get(args.robot)
-    scripted = torch.jit.script(actor.as_jit())
     report = run_dir / "report.json"
     scores = json.loads(report.read_text()).get("evaluation", {}) if report.exists() else {}
     demo_meta = {"source": args.demo}
@@ -61,13 +84,8 @@ def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
         d = load_npz(demo_file)
         demo_meta.update({"source": d.source or args.demo, "robot": d.robot, "fps": d.fps,
                           "num_frames": d.num_frames, "has_motion": d.motion is not None})
-    meta = metadata_for(spec, with_phase=True, action_scale=spec.action_scale,
-                        action_clip=EnvConfig().action_clip, demo=demo_meta, scores=scores)
-    meta.update({"reward": args.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])})
-    save_policy(scripted, meta, out)
-    if onnx:
-        _export_onnx(actor, out.with_suffix(".onnx"))
-    return out
+    extra = {"reward": args.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])}
+    return export_actor(actor, args.robot, out, demo_meta, scores, extra, onnx)
 
 
 def _export_onnx(actor: MLPModel, path: Path) -> None:

@@ -48,6 +48,7 @@ class EnvConfig:
     demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     terminate_on_fall: bool = True         # end the episode when the robot falls
+    oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
 
 
 class QuadrupedEnv(gym.Env):
@@ -87,6 +88,13 @@ class QuadrupedEnv(gym.Env):
         self._history: deque = deque(maxlen=8)
         self._next_push = np.inf
         self._state: RobotState | None = None
+        self._kin = None
+        if cfg.oracle_reward:
+            if self.demo is None or self.demo.motion is None:
+                raise ValueError("oracle_reward needs a demonstration with a reference motion")
+            from virl_quad.kinematics import Kinematics
+
+            self._kin = Kinematics(spec)
 
     # -- episode ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -138,7 +146,18 @@ class QuadrupedEnv(gym.Env):
         self._remember(s)
         terminated = self.cfg.terminate_on_fall and self._fallen(s)
         truncated = self.cfg.time_limit and self.steps >= self.max_steps and not terminated
-        return self._observation(), 0.0, bool(terminated), bool(truncated), self._info()
+        reward = self._oracle_reward(s) if self._kin is not None else 0.0
+        return self._observation(), reward, bool(terminated), bool(truncated), self._info()
+
+    def _oracle_reward(self, s: RobotState) -> float:
+        """motion_imitation's pose-imitation reward against the reference at the demo clock."""
+        from virl_quad.demo.score import Trajectory, reference_trajectory, term_errors, term_rewards
+
+        traj = Trajectory(root_pos=s.base_pos[None], root_quat=s.base_quat[None], q=s.q[None], dq=s.dq[None],
+                          root_lin_vel=s.base_lin_vel[None], root_ang_vel=s.base_ang_vel[None],
+                          feet=self.world.foot_positions()[None])
+        ref = reference_trajectory(self.demo.motion, np.array([self.demo_step / self.demo.fps]), self._kin)
+        return float(term_rewards(term_errors(traj, ref, self._kin))["total"][0])
 
     def _push(self) -> None:
         angle = self.np_random.uniform(0, 2 * np.pi)

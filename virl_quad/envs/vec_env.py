@@ -44,16 +44,16 @@ class _Slice:
 
     def step(self, actions: np.ndarray, time_outs: np.ndarray) -> tuple:
         obs, final, terminated = [], [], np.zeros(len(self.envs), bool)
-        progress = np.zeros(len(self.envs))
+        progress, rewards = np.zeros(len(self.envs)), np.zeros(len(self.envs))
         for i, env in enumerate(self.envs):
-            o, _, term, _, info = env.step(actions[i])
+            o, rewards[i], term, _, info = env.step(actions[i])
             terminated[i] = term
             progress[i] = info["base_pos"][0]
             final.append({k: o[k] for k in _IMAGE_KEYS if k in o})
             if term or time_outs[i]:
                 o, _ = env.reset()
             obs.append(o)
-        return _stack(obs), _stack(final), terminated, progress
+        return _stack(obs), _stack(final), terminated, progress, rewards
 
     def close(self) -> None:
         for env in self.envs:
@@ -161,13 +161,13 @@ class QuadrupedVecEnv(VecEnv):
         return self._obs
 
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        """Step all envs; reward is 0 (the VIRL reward is computed by the trainer)."""
+        """Step all envs. The reward is the env's (0, or the oracle's); the VIRL reward comes from the trainer."""
         a = actions.detach().to("cpu", torch.float64).numpy()
         if a.shape != (self.num_envs, self.num_actions):
             raise ValueError(f"actions must be ({self.num_envs}, {self.num_actions}), got {tuple(a.shape)}")
         self.episode_length_buf += 1
         time_outs = (self.episode_length_buf >= self.max_episode_length).cpu().numpy()
-        obs, final, terminated, progress = self._call("step", self._split(a), self._split(time_outs))
+        obs, final, terminated, progress, env_rewards = self._call("step", self._split(a), self._split(time_outs))
         time_outs &= ~terminated
         dones = terminated | time_outs
         self.episode_length_buf[torch.from_numpy(dones).to(self.device)] = 0
@@ -180,7 +180,7 @@ class QuadrupedVecEnv(VecEnv):
         }
         for k, v in final.items():
             extras[f"final_{k}"] = torch.from_numpy(v).to(self.device)
-        rewards = torch.zeros(self.num_envs, device=self.device)
+        rewards = torch.from_numpy(env_rewards).float().to(self.device)
         return self._obs, rewards, torch.from_numpy(dones).to(self.device), extras
 
     def close(self) -> None:

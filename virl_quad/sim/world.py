@@ -188,12 +188,19 @@ class World:
         js = self.bc.getJointStates(self.robot, self.joint_ids)
         return np.array([j[0] for j in js]), np.array([j[1] for j in js])
 
-    def step(self, q_target: np.ndarray, tau_ff: np.ndarray | float = 0.0) -> None:
-        """Hold PD targets (rad) for one control period (``spec.substeps`` physics steps)."""
+    def step(self, q_target: np.ndarray, tau_ff: np.ndarray | float = 0.0, kp: np.ndarray | None = None,
+             kd: np.ndarray | None = None) -> None:
+        """Hold PD targets (rad) for one control period (``spec.substeps`` physics steps).
+
+        ``kp``/``kd`` (N·m/rad, N·m·s/rad) override the spec's gains (a HAL command's gains);
+        ``None`` keeps the spec's, scaled by the domain randomisation.
+        """
         bc = self.bc
+        kp = self.kp if kp is None else np.asarray(kp, dtype=np.float64)
+        kd = self.kd if kd is None else np.asarray(kd, dtype=np.float64)
         for _ in range(self.spec.substeps):
             q, dq = self.joint_states()
-            self.tau = pd_torque(q_target, q, dq, self.kp, self.kd, self.torque_limit, tau_ff)
+            self.tau = pd_torque(q_target, q, dq, kp, kd, self.torque_limit, tau_ff)
             bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.TORQUE_CONTROL,
                                          forces=self.tau.tolist())
             bc.stepSimulation()
