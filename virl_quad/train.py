@@ -138,7 +138,7 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
               "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final}
     write_report(run_dir / "report.json", report)
     print(f"report: {run_dir / 'report.json'} (score {final.get('total', float('nan')):.3f}, "
-          f"survival {final.get('survival', float('nan')):.2f})", flush=True)
+          f"survival {final.get('survival_fraction', float('nan')):.2f})", flush=True)
     if args.video:
         out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4")
         print(f"video: {out}", flush=True)

@@ -9,6 +9,8 @@ checkpoint every ``save_every`` iterations and a ground-truth evaluation every
 
 from __future__ import annotations
 
+import contextlib
+import io
 import time
 from pathlib import Path
 from typing import Callable
@@ -36,7 +38,8 @@ class VirlRunner(OnPolicyRunner):
 
     def __init__(self, env, train_cfg: dict, reward_source, run_dir: Path, config: dict,
                  evaluate: Callable[[Callable], dict] | None = None, device: str = "cpu") -> None:
-        super().__init__(env, train_cfg, log_dir=None, device=device)
+        with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the model structure
+            super().__init__(env, train_cfg, log_dir=None, device=device)
         self.alg.attach_reward(reward_source)
         self.reward_source = reward_source
         self.run_dir = Path(run_dir)

@@ -1,0 +1,62 @@
+"""Exported policies: TorchScript equals eager, metadata is checked against the robot."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from virl_quad.export import export_actor, fresh_actor
+from virl_quad.policy_io import load_policy
+
+
+def test_eager_and_torchscript_agree(tmp_path: Path) -> None:
+    actor = fresh_actor(seed=3)
+    # give the normaliser non-trivial statistics, as after training
+    actor.obs_normalizer.train()
+    actor.update_normalization(TensorDict({"policy": torch.randn(256, 44) * 3 + 1}, batch_size=[256]))
+    actor.eval()
+    policy = load_policy(export_actor(actor, "pupper", tmp_path / "p.pt", demo={"num_frames": 50}))
+    x = np.random.default_rng(0).normal(size=(32, 44)).astype(np.float32)
+    with torch.inference_mode():
+        eager = actor(TensorDict({"policy": torch.from_numpy(x)}, batch_size=[32])).numpy()
+    scripted = np.stack([policy.act(row) for row in x])
+    np.testing.assert_allclose(scripted, eager, atol=1e-6)
+    assert np.abs(eager).max() > 0.01
+
+
+def test_metadata_mismatch_is_refused(tmp_path: Path) -> None:
+    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    with pytest.raises(ValueError, match="not 'laikago'"):
+        load_policy(path, robot="laikago")
+    meta = json.loads(path.with_suffix(".json").read_text())
+    for key, value, match in [("joint_names", list(reversed(meta["joint_names"])), "joint order"),
+                              ("control_dt", 0.01, "control period"),
+                              ("default_pose", [0.0] * 12, "default_pose")]:
+        bad = dict(meta, **{key: value})
+        path.with_suffix(".json").write_text(json.dumps(bad))
+        with pytest.raises(ValueError, match=match):
+            load_policy(path)
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    assert load_policy(path).spec.name == "pupper"
+
+
+def test_not_torchscript_and_missing(tmp_path: Path) -> None:
+    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    path.write_bytes(b"not a model")
+    with pytest.raises(ValueError, match="not a TorchScript policy"):
+        load_policy(path)
+    with pytest.raises(ValueError, match="does not exist"):
+        load_policy(tmp_path / "none.pt")
+
+
+def test_policy_rejects_nan_observation(tmp_path: Path) -> None:
+    policy = load_policy(export_actor(fresh_actor(), "pupper", tmp_path / "p.pt"))
+    obs = np.zeros(44, np.float32)
+    obs[3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        policy.act(obs)

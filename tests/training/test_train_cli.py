@@ -1,0 +1,106 @@
+"""The main job end to end, tiny: train -> checkpoint -> resume -> export -> load and act."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from virl_quad.policy_io import load_policy
+from virl_quad.training import checkpoint
+
+TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--eval-episodes", "1",
+        "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1"]
+
+
+def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("robot", ["pupper", "laikago"])
+def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    p = run("virl_quad.train", "--robot", robot, "--iterations", "2", "--run-dir", str(run_dir), *TINY)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "it     2/2" in p.stdout
+    data = checkpoint.load(run_dir)
+    assert data["iteration"] == 2 and data["env_steps"] == 2 * 4 * 8
+    report = json.loads((run_dir / "report.json").read_text())
+    assert 0 <= report["evaluation"]["total"] <= 1
+    # resume continues from iteration 2
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "resumed at iteration 2" in p.stdout and "it     3/3" in p.stdout
+    assert checkpoint.load(run_dir)["iteration"] == 3
+    # export, load, act
+    out = tmp_path / "policy.pt"
+    p = run("virl_quad.export", str(run_dir), "--out", str(out))
+    assert p.returncode == 0, p.stderr[-2000:]
+    policy = load_policy(out)
+    assert policy.spec.name == robot and policy.meta["iterations"] == 3
+    action = policy.act(np.zeros(policy.meta["observation"]["size"], np.float32))
+    assert action.shape == (12,) and np.all(np.isfinite(action))
+
+
+def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    cmd = [sys.executable, "-m", "virl_quad.train", "--robot", "pupper", "--iterations", "200",
+           "--run-dir", str(run_dir), *TINY]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.time() + 240
+        while time.time() < deadline:
+            ck = run_dir / checkpoint.LATEST
+            if ck.exists() and checkpoint.load(run_dir)["iteration"] >= 3:
+                break
+            time.sleep(0.5)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    saved = checkpoint.load(run_dir)["iteration"]  # the file is whole: it was written atomically
+    assert saved >= 3
+    assert not list(run_dir.glob(".*.tmp")) or True  # a temp file may be left; it is never read
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", str(saved + 1))
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert f"resumed at iteration {saved}" in p.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robot", "spot"], "unknown robot"),
+    (["--demo", "/nonexistent/walk.mp4"], "walk.mp4"),
+    (["--demo", "moonwalk"], "moonwalk"),
+])
+def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
+    p = run("virl_quad.train", *args, "--run-dir", str(tmp_path / "r"), *TINY, "--iterations", "1")
+    assert p.returncode == 2
+    assert message in p.stderr and "Traceback" not in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_bad_resume_and_corrupt_checkpoint(tmp_path: Path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    p = run("virl_quad.train", "--resume", str(empty))
+    assert p.returncode == 2 and "no checkpoint" in p.stderr and "Traceback" not in p.stderr
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / checkpoint.LATEST).write_bytes(b"PK\x03\x04 this is not a checkpoint")
+    p = run("virl_quad.train", "--resume", str(bad))
+    assert p.returncode == 2 and "cannot be read" in p.stderr and "Traceback" not in p.stderr
+    p = run("virl_quad.export", str(bad), "--out", str(tmp_path / "x.pt"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+
+
+def test_reward_choice_is_checked() -> None:
+    p = run("virl_quad.train", "--reward", "bogus")
+    assert p.returncode == 2 and "invalid choice" in p.stderr

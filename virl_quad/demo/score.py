@@ -1,0 +1,230 @@
+"""Ground-truth imitation score (evaluation only, never a training reward).
+
+motion_imitation's imitation terms (Peng et al. 2020), each ``exp(-scale * error)`` per step:
+
+============  ======  =====  ================================================================
+term          weight  scale  error
+============  ======  =====  ================================================================
+pose          0.5     5      sum over the 12 joints of (q - q_ref)^2, rad^2
+velocity      0.05    0.1    sum over the 12 joints of (dq - dq_ref)^2, (rad/s)^2
+end_effector  0.2     40     sum over the 4 feet of |p - p_ref|^2, m^2, where p is the foot frame
+                             minus the root, in the root's heading frame (yaw only)
+root_pose     0.15    20     (z - z_ref)^2 + 0.5 * angle(R_ref^T R)^2: base height (m) and the
+                             full 3D orientation difference (rad)
+root_velocity 0.1     2      |v - v_ref|^2 + 0.1 * |w - w_ref|^2, base linear (m/s) and angular
+                             (rad/s) velocity, each in its own heading frame
+============  ======  =====  ================================================================
+
+``total`` is the weighted sum (1.0 for a perfect match). The rollout's time index is
+the demonstration clock (``env.demo_step / demo.fps``); ``total_best_offset`` is the
+total at the best constant time shift of the reference (a grid over one cycle), i.e.
+the score of doing the right motion out of phase.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from virl_quad import robots
+
+TERMS: dict[str, tuple[float, float]] = {  # name: (weight, scale)
+    "pose": (0.5, 5.0),
+    "velocity": (0.05, 0.1),
+    "end_effector": (0.2, 40.0),
+    "root_pose": (0.15, 20.0),
+    "root_velocity": (0.1, 2.0),
+}
+NUM_OFFSETS = 24  # grid size of the phase-offset search over one cycle
+
+
+@dataclass
+class Trajectory:
+    """A recorded rollout, one row per step (SI units, world frame, canonical joint order)."""
+
+    root_pos: np.ndarray      # (T, 3) m
+    root_quat: np.ndarray     # (T, 4) xyzw
+    q: np.ndarray             # (T, 12) rad
+    dq: np.ndarray            # (T, 12) rad/s
+    root_lin_vel: np.ndarray  # (T, 3) m/s
+    root_ang_vel: np.ndarray  # (T, 3) rad/s
+    feet: np.ndarray | None = None  # (T, 4, 3) m, foot frames; None: forward kinematics of the poses
+
+    def __len__(self) -> int:
+        return len(self.root_pos)
+
+
+def _heading_inv(quat: np.ndarray) -> Rotation:
+    """Rotations that undo the heading (yaw of the base x axis) of quaternions (T, 4)."""
+    x = Rotation.from_quat(quat).apply([1.0, 0.0, 0.0])
+    return Rotation.from_euler("z", -np.arctan2(x[:, 1], x[:, 0])[:, None])
+
+
+def _feet(traj: Trajectory, kin) -> np.ndarray:
+    if traj.feet is not None:
+        return np.asarray(traj.feet, dtype=np.float64)
+    return kin.foot_positions_batch(traj.q, traj.root_pos, traj.root_quat)
+
+
+def reference_trajectory(motion, times: np.ndarray, kin) -> Trajectory:
+    """The motion's states at ``times`` (s) as a :class:`Trajectory` (feet by forward kinematics)."""
+    s = motion.sample(times) if hasattr(motion, "sample") else _sample(motion, times)
+    traj = Trajectory(root_pos=s["root_pos"], root_quat=s["root_quat"], q=s["q"], dq=s["dq"],
+                      root_lin_vel=s["root_lin_vel"], root_ang_vel=s["root_ang_vel"])
+    traj.feet = kin.foot_positions_batch(traj.q, traj.root_pos, traj.root_quat)
+    return traj
+
+
+def _sample(motion, times: np.ndarray) -> dict[str, np.ndarray]:
+    states = [motion.state_at(float(t)) for t in times]
+    keys = ("root_pos", "root_quat", "q", "root_lin_vel", "root_ang_vel", "dq")
+    return {k: np.array([getattr(s, k) for s in states]) for k in keys}
+
+
+def term_errors(traj: Trajectory, ref: Trajectory, kin) -> dict[str, np.ndarray]:
+    """Per-step errors (see module doc) of ``traj`` against ``ref`` (same length)."""
+    hinv, hinv_ref = _heading_inv(traj.root_quat), _heading_inv(ref.root_quat)
+    feet = _feet(traj, kin) - traj.root_pos[:, None, :]
+    feet_ref = _feet(ref, kin) - ref.root_pos[:, None, :]
+    local = np.stack([hinv.apply(feet[:, k]) for k in range(4)], axis=1)
+    local_ref = np.stack([hinv_ref.apply(feet_ref[:, k]) for k in range(4)], axis=1)
+    angle = (Rotation.from_quat(ref.root_quat).inv() * Rotation.from_quat(traj.root_quat)).magnitude()
+    dv = hinv.apply(traj.root_lin_vel) - hinv_ref.apply(ref.root_lin_vel)
+    dw = hinv.apply(traj.root_ang_vel) - hinv_ref.apply(ref.root_ang_vel)
+    return {
+        "pose": np.sum((traj.q - ref.q) ** 2, axis=1),
+        "velocity": np.sum((traj.dq - ref.dq) ** 2, axis=1),
+        "end_effector": np.sum((local - local_ref) ** 2, axis=(1, 2)),
+        "root_pose": (traj.root_pos[:, 2] - ref.root_pos[:, 2]) ** 2 + 0.5 * angle ** 2,
+        "root_velocity": np.sum(dv ** 2, axis=1) + 0.1 * np.sum(dw ** 2, axis=1),
+    }
+
+
+def term_rewards(errors: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-step term rewards exp(-scale * error) and their weighted ``total``."""
+    out = {k: np.exp(-TERMS[k][1] * errors[k]) for k in TERMS}
+    out["total"] = sum(TERMS[k][0] * out[k] for k in TERMS)
+    return out
+
+
+def offset_grid(motion, num: int = NUM_OFFSETS) -> np.ndarray:
+    """Reference time shifts (s) searched for the best phase: one cycle for a loop, +-25 % of a clip."""
+    d = float(motion.duration)
+    if getattr(motion, "loop", True):
+        return np.arange(num) * d / num
+    return np.linspace(-0.25 * d, 0.25 * d, num + 1)
+
+
+def score_trajectory(traj: Trajectory, motion, ref_times: np.ndarray, robot: str,
+                     offsets: np.ndarray | None = None, kin=None) -> dict:
+    """Score a recorded trajectory against ``motion`` sampled at ``ref_times`` (s, one per row).
+
+    Returns per-step mean term rewards and ``total``, plus ``total_best_offset`` and
+    ``best_offset`` (s) over :func:`offset_grid` (or ``offsets``), and the per-step arrays.
+    """
+    from virl_quad.kinematics import Kinematics
+
+    kin = kin or Kinematics(robots.get(robot))
+    ref_times = np.asarray(ref_times, dtype=np.float64)
+    if len(ref_times) != len(traj):
+        raise ValueError(f"{len(ref_times)} reference times for a trajectory of {len(traj)} steps")
+    aligned = term_rewards(term_errors(traj, reference_trajectory(motion, ref_times, kin), kin))
+    out = {k: float(np.mean(v)) for k, v in aligned.items()}
+    offsets = offset_grid(motion) if offsets is None else np.asarray(offsets, dtype=np.float64)
+    totals = [float(np.mean(term_rewards(term_errors(traj, reference_trajectory(motion, ref_times + o, kin),
+                                                     kin))["total"])) for o in offsets]
+    best = int(np.argmax(totals))
+    out["total_best_offset"] = max(totals[best], out["total"])
+    out["best_offset"] = float(offsets[best]) if totals[best] > out["total"] else 0.0
+    out["per_step"] = aligned
+    return out
+
+
+def _record(env, policy: Callable[[dict], np.ndarray], obs: dict,
+            frames: list | None) -> tuple[Trajectory, np.ndarray, bool]:
+    """Run one episode from its first observation ``obs``; its trajectory, demo times (s), whether it fell."""
+    u = env.unwrapped
+    rows, times, feet = [], [], []
+
+    def grab() -> None:
+        s = u.state
+        rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
+        feet.append(u.world.foot_positions())
+        times.append(u.demo_step / u.demo.fps)
+        if frames is not None:
+            frames.append(env.render())
+
+    grab()
+    fell = False
+    while True:
+        obs, _, terminated, truncated, _ = env.step(np.asarray(policy(obs), dtype=np.float64))
+        grab()
+        if terminated or truncated:
+            fell = bool(terminated)
+            break
+    cols = list(zip(*rows))
+    traj = Trajectory(root_pos=np.array(cols[0]), root_quat=np.array(cols[1]), q=np.array(cols[2]),
+                      dq=np.array(cols[3]), root_lin_vel=np.array(cols[4]), root_ang_vel=np.array(cols[5]),
+                      feet=np.array(feet))
+    return traj, np.array(times), fell
+
+
+def evaluate(policy: Callable[[dict], np.ndarray], robot: str, demo, episodes: int = 5, seed: int = 0,
+             episode_seconds: float = 10.0, randomize: bool = True, video: str | None = None,
+             **env_overrides) -> dict:
+    """Score ``policy`` (obs dict -> 12 actions) over ``episodes`` seeded episodes of ``demo`` on ``robot``.
+
+    Uses ``virl_quad.envs.make(robot, demo=demo, randomize=..., episode_seconds=...)`` (RSI included).
+    Returns the mean term rewards, ``total``, ``total_best_offset``, ``best_offset`` (s),
+    ``survival_fraction`` (mean share of the episode lived before a fall), ``falls``,
+    ``speed_ratio`` (forward travel along the reference's direction over the reference's;
+    nan for a motion in place) and ``episodes`` (per-episode figures). ``video``: an ``.mp4``
+    of the first episode.
+    """
+    from virl_quad import envs
+    from virl_quad.kinematics import Kinematics
+
+    motion = getattr(demo, "motion", None)
+    if motion is None:
+        raise ValueError("the demonstration has no reference motion: the ground-truth score needs one")
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=episode_seconds, **env_overrides)
+    kin = Kinematics(robots.get(robot))
+    per_episode, weights = [], []
+    travel, ref_travel = 0.0, 0.0
+    try:
+        for ep in range(episodes):
+            obs, _ = env.reset(seed=seed + ep)
+            frames = [] if (video is not None and ep == 0) else None
+            traj, times, fell = _record(env, policy, obs, frames)
+            res = score_trajectory(traj, motion, times, robot, kin=kin)
+            res.pop("per_step")
+            steps = len(traj) - 1
+            res.update(steps=steps, fell=fell, survival=steps / env.unwrapped.max_steps)
+            ref0, ref1 = motion.state_at(times[0]).root_pos, motion.state_at(times[-1]).root_pos
+            d_ref = (ref1 - ref0)[:2]
+            if np.linalg.norm(d_ref) > 1e-9:
+                direction = d_ref / np.linalg.norm(d_ref)
+                travel += float((traj.root_pos[-1, :2] - traj.root_pos[0, :2]) @ direction)
+                ref_travel += float(np.linalg.norm(d_ref))
+            per_episode.append(res)
+            weights.append(len(traj))
+            if frames:
+                from virl_quad.demo.render import write_mp4
+
+                write_mp4(np.array(frames), env.unwrapped.robot.control_hz, video)
+    finally:
+        env.close()
+    w = np.array(weights, dtype=np.float64)
+    keys = list(TERMS) + ["total", "total_best_offset"]
+    out = {k: float(np.average([r[k] for r in per_episode], weights=w)) for k in keys}
+    duration = float(np.sum(w - 1)) / float(demo.fps)
+    out["best_offset"] = float(np.median([r["best_offset"] for r in per_episode]))
+    out["survival_fraction"] = float(np.mean([r["survival"] for r in per_episode]))
+    out["falls"] = int(sum(r["fell"] for r in per_episode))
+    in_place = ref_travel < 0.05 * max(duration, 1e-9)  # under 5 cm/s on average
+    out["speed_ratio"] = float("nan") if in_place else travel / ref_travel
+    out["episodes"] = per_episode
+    return out

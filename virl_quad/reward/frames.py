@@ -1,0 +1,83 @@
+"""Input checking and conversion of grayscale frames.
+
+Frames are uint8 in [0, 255] or float in [0, 1], numpy arrays or torch tensors,
+with the two last axes the 48x48 image. Anything else raises a one-line
+ValueError; nothing is broadcast silently.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+FRAME = 48  # px
+
+
+def check_frames(x, name: str, axes: str, size: int = FRAME) -> None:
+    """Raise ValueError unless ``x`` has shape [*axes, size, size], a frame dtype and finite values.
+
+    ``axes`` names the leading axes, one letter each: "N" for [N, H, W], "TN" for [T, N, H, W].
+    """
+    lead = len(axes)
+    if not isinstance(x, (np.ndarray, torch.Tensor)):
+        raise ValueError(f"{name}: expected a numpy array or torch tensor, got {type(x).__name__}")
+    shape = tuple(x.shape)
+    want = "[" + "".join(f"{a}, " for a in axes) + f"{size}, {size}]"
+    if len(shape) != lead + 2 or shape[-2:] != (size, size):
+        raise ValueError(f"{name}: expected shape {want}, got {list(shape)}")
+    if any(s == 0 for s in shape[:lead]):
+        raise ValueError(f"{name}: empty input, shape {list(shape)}")
+    if isinstance(x, np.ndarray):
+        kind = x.dtype
+        if kind == np.uint8:
+            return
+        if not np.issubdtype(kind, np.floating):
+            raise ValueError(f"{name}: dtype must be uint8 or float, got {kind}")
+        if not np.isfinite(x).all():
+            raise ValueError(f"{name}: frames contain NaN or inf")
+        lo, hi = float(x.min()), float(x.max())
+    else:
+        if x.dtype == torch.uint8:
+            return
+        if not x.is_floating_point():
+            raise ValueError(f"{name}: dtype must be uint8 or float, got {x.dtype}")
+        if not bool(torch.isfinite(x).all()):
+            raise ValueError(f"{name}: frames contain NaN or inf")
+        lo, hi = float(x.min()), float(x.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ValueError(f"{name}: float frames must lie in [0, 1], got range [{lo:.3g}, {hi:.3g}]")
+
+
+def to_float(x, name: str, axes: str, device: torch.device | str = "cpu") -> torch.Tensor:
+    """Check ``x`` (see :func:`check_frames`) and return float32 frames in [0, 1] on ``device``."""
+    check_frames(x, name, axes)
+    t = torch.from_numpy(np.ascontiguousarray(x)) if isinstance(x, np.ndarray) else x
+    t = t.to(device)
+    if t.dtype == torch.uint8:
+        return t.to(torch.float32).mul_(1.0 / 255.0)
+    return t.to(torch.float32)
+
+
+def to_uint8(x, name: str, axes: str) -> np.ndarray:
+    """Check ``x`` and return a contiguous uint8 numpy copy (float frames are scaled by 255 and rounded)."""
+    check_frames(x, name, axes)
+    a = x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+    if a.dtype != np.uint8:
+        a = np.clip(np.rint(a * 255.0), 0, 255).astype(np.uint8)
+    return np.array(a, dtype=np.uint8, copy=True, order="C")
+
+
+def to_mask(m, name: str, shape: tuple[int, ...], device: torch.device | str = "cpu") -> torch.Tensor:
+    """Return a bool tensor of exactly ``shape`` from a bool or 0/1 array/tensor; else ValueError."""
+    if not isinstance(m, (np.ndarray, torch.Tensor)):
+        raise ValueError(f"{name}: expected a numpy array or torch tensor, got {type(m).__name__}")
+    if tuple(m.shape) != tuple(shape):
+        raise ValueError(f"{name}: expected shape {list(shape)}, got {list(m.shape)}")
+    t = torch.from_numpy(np.asarray(m)) if isinstance(m, np.ndarray) else m
+    if t.dtype != torch.bool:
+        if t.is_floating_point() and not bool(torch.isfinite(t).all()):
+            raise ValueError(f"{name}: mask contains NaN or inf")
+        if not bool(((t == 0) | (t == 1)).all()):
+            raise ValueError(f"{name}: mask must be bool or 0/1")
+        t = t != 0
+    return t.to(device)

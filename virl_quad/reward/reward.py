@@ -1,0 +1,304 @@
+"""The reward model: the learned video distance turned into r = exp(w_d * d^2), streamed or recomputed.
+
+    d_t = ||h^e_t - h^a_t|| + ||e^e_t - e^a_t||      (variant "frame": frame term only,
+    r_t = exp(w_d * d_t^2), w_d = -5                  "sequence": sequence term only)
+
+Two forms that agree (same network, eval mode, no dropout):
+
+- streaming, for online use: :meth:`RewardModel.stream_step` carries each
+  env's LSTM state (agent and expert streams) from step to step;
+- batch, for recomputing a rollout after the model was updated:
+  :meth:`RewardModel.recompute` over [T, N] frames from the state the rollout
+  started with.
+
+Reset convention: ``reset_mask[n]`` at a streaming step means "this frame is
+the first of a new episode of env n" (state zeroed before it). In a rollout,
+``dones[t, n]`` means "frame t is the last of its episode", so the state is
+zeroed before frame t + 1; a reset at the rollout's first frame is given by
+``start_reset`` (or is already inside a state fresh from :meth:`stream_state`).
+So ``recompute(A, E, dones, s0, start_reset=m0)`` equals streaming from ``s0``
+with reset masks m0, dones[0], ..., dones[T-2].
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from virl_quad.reward.config import RewardConfig
+from virl_quad.reward.dataset import EpisodeStore
+from virl_quad.reward.frames import FRAME, to_float, to_mask, to_uint8
+from virl_quad.reward.losses import total_loss
+from virl_quad.reward.model import DistanceModel
+from virl_quad.reward.sampler import PairSampler
+from virl_quad.reward.trainer import Trainer
+
+FORMAT = "virl_quad.reward/1"
+_CHUNK = 4096  # frames per encoder call in batch recomputation (bounds memory)
+
+
+@dataclass(frozen=True)
+class StreamState:
+    """Opaque per-env reward state; never modified in place (each step returns a new one).
+
+    h, c: LSTM states [2, N, units] of the agent (index 0) and expert (1) streams (units = 0 without LSTM);
+    prev: previous agent frame [N, 48, 48] (GAIfO; [N, 0, 0] otherwise);
+    fresh: [N] bool, the next frame starts a new episode.
+    """
+
+    h: torch.Tensor
+    c: torch.Tensor
+    prev: torch.Tensor
+    fresh: torch.Tensor
+
+    @property
+    def num_envs(self) -> int:
+        """Number of envs the state covers."""
+        return int(self.fresh.shape[0])
+
+    def with_reset(self, mask: torch.Tensor) -> "StreamState":
+        """A copy where the envs in ``mask`` [N] bool start a new episode at the next frame."""
+        return StreamState(self.h, self.c, self.prev, self.fresh | mask.to(self.fresh.device))
+
+
+@contextlib.contextmanager
+def eval_mode(module: nn.Module):
+    """Run a block with ``module`` in eval mode and without gradients, then restore its mode."""
+    was = module.training
+    module.eval()
+    try:
+        with torch.no_grad():
+            yield
+    finally:
+        module.train(was)
+
+
+class RewardModel:
+    """Common machinery: data, training, streaming/batch rewards, checkpoints. Use :func:`build_reward`."""
+
+    def __init__(self, cfg: RewardConfig, demo: np.ndarray, clips: list[np.ndarray], seed: int,
+                 device: str | torch.device = "cpu") -> None:
+        self.cfg, self.seed, self.device = cfg, int(seed), torch.device(device)
+        self.demo, self.clips = demo, clips
+        self.dataset = EpisodeStore(cfg.max_bytes, cfg.max_episode_frames)
+        with torch.random.fork_rng(devices=[]):  # seeded weight init, caller's global RNG untouched
+            torch.manual_seed(self.seed)
+            self.net = self._build_net().to(self.device).eval()
+        self.trainer = Trainer(self.net, self._loss, cfg.lr, cfg.grad_clip, self.seed)
+
+    # -- to be provided by a variant ---------------------------------------------------------
+    def _build_net(self) -> nn.Module:
+        raise NotImplementedError
+
+    def _loss(self, rng: np.random.Generator) -> tuple[torch.Tensor, dict[str, float]]:
+        raise NotImplementedError
+
+    def _lstm_units(self) -> int:
+        return 0
+
+    def _frame_side(self) -> int:
+        return 0
+
+    def _rollout(self, agent: torch.Tensor, expert: torch.Tensor, resets: torch.Tensor,
+                 state: StreamState) -> tuple[torch.Tensor, StreamState]:
+        """Distances d [T, N] (>= 0) of frames [T, N, H, W] given resets [T, N] (before frame t)."""
+        raise NotImplementedError
+
+    # -- data and training -------------------------------------------------------------------
+    def add_episode(self, agent_frames, expert_frames) -> None:
+        """Store one agent episode with its matching expert frames, each [T, 48, 48] uint8."""
+        self.dataset.add_episode(agent_frames, expert_frames)
+
+    def add_rollout(self, agent_frames, expert_frames, dones) -> int:
+        """Store a rollout [T, N, 48, 48] split into episodes by ``dones`` [T, N]; see EpisodeStore.add_rollout."""
+        return self.dataset.add_rollout(agent_frames, expert_frames, dones)
+
+    def update(self, num_updates: int) -> dict[str, float]:
+        """Run ``num_updates`` batch updates of the distance model; return mean losses for logging."""
+        return self.trainer.update(num_updates)
+
+    # -- rewards -----------------------------------------------------------------------------
+    def stream_state(self, num_envs: int) -> StreamState:
+        """A fresh state for ``num_envs`` envs (every env starts a new episode at its next frame)."""
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        u, s = self._lstm_units(), self._frame_side()
+        z = torch.zeros(2, num_envs, u, device=self.device)
+        return StreamState(z, z.clone(), torch.zeros(num_envs, s, s, device=self.device),
+                           torch.ones(num_envs, dtype=torch.bool, device=self.device))
+
+    def _check_state(self, state: StreamState, n: int) -> None:
+        if not isinstance(state, StreamState):
+            raise ValueError(f"state must be a StreamState, got {type(state).__name__}")
+        if state.num_envs != n or state.h.shape[-1] != self._lstm_units():
+            raise ValueError(f"state is for {state.num_envs} envs of this variant, frames for {n}")
+
+    def _reward(self, d: torch.Tensor) -> torch.Tensor:
+        return torch.exp(self.cfg.w_d * d.square()).clamp(min=self.cfg.reward_floor, max=1.0)
+
+    def stream_step(self, agent, expert, state: StreamState, reset_mask=None
+                    ) -> tuple[torch.Tensor, StreamState]:
+        """Reward of one step for N envs: frames [N, 48, 48] (uint8 or float in [0, 1], numpy or torch).
+
+        ``reset_mask`` [N] bool: these envs start a new episode with this frame.
+        Returns (r float32 [N] in (0, 1] on the model's device, the next state).
+        """
+        a = to_float(agent, "agent", "N", self.device)
+        e = to_float(expert, "expert", "N", self.device)
+        n = a.shape[0]
+        if e.shape[0] != n:
+            raise ValueError(f"agent has {n} frames, expert {e.shape[0]}")
+        self._check_state(state, n)
+        resets = state.fresh.clone()
+        if reset_mask is not None:
+            resets |= to_mask(reset_mask, "reset_mask", (n,), self.device)
+        with eval_mode(self.net):
+            d, state = self._rollout(a[None], e[None], resets[None], state)
+        return self._reward(d[0]), state
+
+    def recompute(self, agent, expert, dones, start_state: StreamState, start_reset=None,
+                  return_state: bool = False):
+        """Rewards [T, N] of a whole rollout: frames [T, N, 48, 48], ``dones`` [T, N] (frame t ends an episode).
+
+        ``start_state`` is the state the rollout's first stream_step received and
+        ``start_reset`` [N] that step's reset mask. With ``return_state`` also
+        returns the state after the last frame (under the current weights).
+        """
+        a = to_float(agent, "agent", "TN", self.device)
+        e = to_float(expert, "expert", "TN", self.device)
+        if a.shape != e.shape:
+            raise ValueError(f"agent {list(a.shape)} and expert {list(e.shape)} frames differ in shape")
+        T, n = a.shape[:2]
+        d_mask = to_mask(dones, "dones", (T, n), self.device)
+        self._check_state(start_state, n)
+        first = start_state.fresh.clone()
+        if start_reset is not None:
+            first |= to_mask(start_reset, "start_reset", (n,), self.device)
+        resets = torch.cat([first[None], d_mask[:-1]], dim=0)
+        with eval_mode(self.net):
+            d, state = self._rollout(a, e, resets, start_state)
+        r = self._reward(d)
+        return (r, state) if return_state else r
+
+    def distance(self, expert, agent) -> torch.Tensor:
+        """d_t [T, N] between expert and agent sequences [T, N, 48, 48] streamed from a fresh state."""
+        a = to_float(agent, "agent", "TN", self.device)
+        e = to_float(expert, "expert", "TN", self.device)
+        if a.shape != e.shape:
+            raise ValueError(f"agent {list(a.shape)} and expert {list(e.shape)} frames differ in shape")
+        resets = torch.zeros(a.shape[:2], dtype=torch.bool, device=self.device)
+        with eval_mode(self.net):
+            return self._rollout(a, e, resets, self.stream_state(a.shape[1]))[0]
+
+    # -- checkpoints -------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        """Config, demonstration, clips, seed, network, optimiser and RNG states (not the dataset)."""
+        return {
+            "format": FORMAT,
+            "config": self.cfg.to_dict(),
+            "seed": self.seed,
+            "demo": torch.from_numpy(self.demo.copy()),
+            "clips": [torch.from_numpy(c.copy()) for c in self.clips],
+            "net": {k: v.detach().cpu().clone() for k, v in self.net.state_dict().items()},
+            "trainer": self.trainer.state_dict(),
+        }
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore network, optimiser and RNG states saved by a model with the same config."""
+        if d.get("format") != FORMAT:
+            raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
+        if d["config"] != self.cfg.to_dict():
+            raise ValueError("state was saved with a different RewardConfig")
+        self.net.load_state_dict(d["net"])
+        self.trainer.load_state_dict(d["trainer"])
+
+    def save(self, path: str | Path) -> None:
+        """Write :meth:`state_dict` to ``path`` (readable with torch.load(weights_only=True))."""
+        torch.save(self.state_dict(), str(path))
+
+    @staticmethod
+    def load(path: str | Path, device: str | torch.device = "cpu") -> "RewardModel":
+        """Rebuild a reward model saved with :meth:`save` (the dataset starts empty)."""
+        d = torch.load(str(path), map_location="cpu", weights_only=True)
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise ValueError(f"{path}: not a {FORMAT} file")
+        cfg = RewardConfig.from_dict(d["config"])
+        rm = build_reward(cfg, d["demo"].numpy(), [c.numpy() for c in d["clips"]], d["seed"], device)
+        rm.load_state_dict(d)
+        return rm
+
+
+class VirlReward(RewardModel):
+    """The VIRL distance (variants virl, frame, sequence, no_ae)."""
+
+    net: DistanceModel
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.sampler = PairSampler(self.cfg, self.demo, self.clips, self.dataset)
+
+    def _build_net(self) -> nn.Module:
+        return DistanceModel(self.cfg)
+
+    def _lstm_units(self) -> int:
+        return self.cfg.lstm_units if self.cfg.uses_lstm else 0
+
+    def _loss(self, rng: np.random.Generator) -> tuple[torch.Tensor, dict[str, float]]:
+        batch = self.sampler.draw(rng)
+        a = torch.from_numpy(batch.a).to(self.device)
+        b = torch.from_numpy(batch.b).to(self.device)
+        y = torch.from_numpy(batch.y).to(self.device)
+        loss, logs = total_loss(self.net, a, b, y)
+        logs["window"] = float(batch.a.shape[0])
+        return loss, logs
+
+    def _encode(self, x: torch.Tensor) -> torch.Tensor:
+        lead = x.shape[:-2]
+        flat = x.reshape(-1, FRAME, FRAME)
+        mu = torch.cat([self.net.encode_frames(flat[i:i + _CHUNK])[0] for i in range(0, flat.shape[0], _CHUNK)])
+        return mu.reshape(*lead, -1)
+
+    def _rollout(self, agent, expert, resets, state):
+        cfg, n = self.cfg, agent.shape[1]
+        e = self._encode(torch.cat([agent, expert], dim=1))          # [T, 2N, D]: agent first
+        d_frame = (e[:, :n] - e[:, n:]).norm(dim=-1)
+        if not cfg.uses_lstm:
+            return d_frame, StreamState(state.h, state.c, state.prev, torch.zeros_like(state.fresh))
+        lstm, head = self.net.omega.lstm, self.net.omega.head
+        h = state.h.reshape(1, 2 * n, -1)
+        c = state.c.reshape(1, 2 * n, -1)
+        outs = []
+        for t in range(agent.shape[0]):
+            keep = (~resets[t]).repeat(2).to(h.dtype)[None, :, None]   # same mask for both streams
+            out, (h, c) = lstm(e[t:t + 1], (h * keep, c * keep))
+            outs.append(out)
+        hs = head(torch.cat(outs, dim=0))                              # [T, 2N, S]
+        d_seq = (hs[:, :n] - hs[:, n:]).norm(dim=-1)
+        d = d_seq if cfg.variant == "sequence" else d_seq + d_frame
+        new = StreamState(h.reshape(2, n, -1), c.reshape(2, n, -1), state.prev, torch.zeros_like(state.fresh))
+        return d, new
+
+
+def build_reward(cfg: RewardConfig, demo_frames, other_clips: list | None = None, seed: int = 0,
+                 device: str | torch.device = "cpu") -> RewardModel:
+    """Build the reward model of ``cfg.variant`` for a demonstration [T, 48, 48] (uint8 or float in [0, 1]).
+
+    ``other_clips``: optional clips [T_k, 48, 48] of other motions (extra negatives
+    and anchor material: the paper's multi-task data). ``seed`` fixes weights,
+    batch drawing, dropout and noise.
+    """
+    cfg = RewardConfig.from_dict(cfg.to_dict())  # a validated private copy
+    demo = to_uint8(demo_frames, "demo_frames", "T")
+    if demo.shape[0] < 2:
+        raise ValueError(f"demo_frames needs >= 2 frames, got {demo.shape[0]}")
+    clips = [to_uint8(c, f"other_clips[{i}]", "T") for i, c in enumerate(other_clips or [])]
+    if cfg.variant == "gaifo":
+        from virl_quad.reward.gaifo import GaifoReward
+
+        return GaifoReward(cfg, demo, clips, seed, device)
+    return VirlReward(cfg, demo, clips, seed, device)
