@@ -106,6 +106,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         raise UserError("--device cuda asked for, but torch sees no CUDA device")
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
+    if not args.device.startswith("cuda"):
+        # One thread: the env workers own the other cores, and an oversubscribed torch is 10x slower.
+        torch.set_num_threads(1)
     print(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
           f"run_dir={run_dir}", flush=True)
     demo, env, runner = build(args, run_dir, data)

@@ -29,12 +29,12 @@ class TrainArgs:
     run_dir: str = ""                  # output folder (default: runs/<robot>-<reward>-<date>)
     resume: str = ""                   # run folder to continue from its latest checkpoint
     save_every: int = 10               # write a checkpoint every N iterations
-    eval_every: int = 50               # ground-truth evaluation every N iterations (0: only at the end)
-    eval_episodes: int = 4             # episodes per evaluation (fixed seeds)
+    eval_every: int = 25               # ground-truth evaluation every N iterations (0: only at the end)
+    eval_episodes: int = 2             # episodes per evaluation (fixed seeds)
     eval_seconds: float = 10.0         # s, length of an evaluation episode
     episode_seconds: float = 10.0      # s, training episode time limit
     randomize: bool = True             # domain randomisation during training
-    reward_updates: int = 8            # distance-model batch updates per iteration (M in Algorithm 1)
+    reward_updates: int = 4            # distance-model batch updates per iteration (M in Algorithm 1)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus
     init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
