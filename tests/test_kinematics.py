@@ -11,7 +11,7 @@ import pytest
 
 from virl_quad import robots
 from virl_quad.kinematics import Kinematics, joint_limit_violation, laikago_clip_root_to_zup, quat_to_matrix
-from virl_quad.kinematics._quiet import quiet_fd
+from virl_quad.quiet import quiet_fd
 from virl_quad.kinematics.frames import quat_from_euler, random_quat
 from virl_quad.sim.world import World
 

@@ -15,7 +15,7 @@ import sys
 import time
 
 from virl_quad import robots
-from virl_quad.kinematics._quiet import quiet_fd
+from virl_quad.quiet import quiet_fd
 
 CHOICES = (*robots.names(), "all")
 

@@ -49,7 +49,8 @@ def __getattr__(name: str):
 
 def cache_dir() -> Path:
     """Folder of cached built-in gait renders: ``$VIRL_QUAD_CACHE``, else ``$XDG_CACHE_HOME/virl_quad``
-    (default ``~/.cache/virl_quad``)."""
+    (default ``~/.cache/virl_quad``). Entries are keyed by robot, gait, :data:`CACHE_VERSION` and a
+    hash of the gait parameters, the robot spec and its URDF, so a changed camera or gait re-renders."""
     if os.environ.get("VIRL_QUAD_CACHE"):
         return Path(os.environ["VIRL_QUAD_CACHE"])
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
@@ -64,12 +65,28 @@ def _bad_source(source: str) -> ValueError:
                       f"or a video ({'/'.join(VIDEO_SUFFIXES)})")
 
 
+def _cache_key(robot: str, gait: str) -> str:
+    """Short hash of everything a gait render depends on: gait parameters, robot spec, URDF text."""
+    import dataclasses
+    import hashlib
+
+    from virl_quad.demo.gaits import gait_params
+
+    spec = robots.get(robot)
+    h = hashlib.sha1(repr((CACHE_VERSION, gait_params(robot, gait), dataclasses.astuple(spec))).encode())
+    try:
+        h.update(Path(spec.urdf_path).read_bytes())
+    except OSError:
+        pass
+    return h.hexdigest()[:10]
+
+
 def gait_demonstration(gait: str, robot: str, use_cache: bool = True) -> Demonstration:
     """The rendered demonstration of built-in ``gait`` on ``robot``, cached under :func:`cache_dir`."""
     from virl_quad.demo.gaits import gait_motion
     from virl_quad.demo.render import load_npz, render_demonstration, save_npz
 
-    path = cache_dir() / f"{robot}_{gait}_{CACHE_VERSION}.npz"
+    path = cache_dir() / f"{robot}_{gait}_{CACHE_VERSION}_{_cache_key(robot, gait)}.npz"
     if use_cache and path.is_file():
         try:
             return load_npz(path)

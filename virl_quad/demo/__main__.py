@@ -6,6 +6,7 @@
     python -m virl_quad.demo show demo.npz --out grid.png
     python -m virl_quad.demo contacts [--dir ../shared/motions]
     python -m virl_quad.demo score [--robot pupper] [--gait trot]
+    python -m virl_quad.demo roundtrip [--robot pupper] [--preview render|frames]
 
 Bad input (missing file, unreadable or empty video, malformed motion file, unknown gait or
 robot) prints one line ``error: ...`` on stderr and exits with code 2, without a traceback.
@@ -107,6 +108,19 @@ def cmd_score(a: argparse.Namespace) -> None:
         print(f"{name:22s} " + " ".join(f"{res[k]:13.4f}" for k in keys))
 
 
+def cmd_roundtrip(a: argparse.Namespace) -> None:
+    """Render -> .mp4 -> import error, and ground motion of forward vs in-place demos after import."""
+    from virl_quad.demo import checks
+
+    robots.get(a.robot)
+    r = checks.progress_visibility(a.robot, a.gait, preview=a.preview, seconds=a.seconds)
+    print(f"{a.robot} {a.gait}, preview {a.preview}: round-trip MAE {r['roundtrip_mae_forward']:.2f} "
+          f"(in place {r['roundtrip_mae_in_place']:.2f}) gray levels of 255")
+    print(f"{'ground strip':18s} {'change/frame':>13s} {'shift px/frame':>15s}")
+    for name in ("rendered_forward", "rendered_in_place", "imported_forward", "imported_in_place"):
+        print(f"{name:18s} {r[name + '_ground_change']:13.3f} {r[name + '_ground_shift_px']:15.3f}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m virl_quad.demo`` argument parser."""
     from virl_quad.demo.gaits import GAIT_NAMES
@@ -148,12 +162,18 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
     k.add_argument("--seconds", type=float, default=4.0)
     k.set_defaults(func=cmd_score)
+    t = sub.add_parser("roundtrip", help="render -> .mp4 -> import error and forward-progress visibility")
+    t.add_argument("--robot", default="pupper")
+    t.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
+    t.add_argument("--preview", choices=PREVIEWS, default="render")
+    t.add_argument("--seconds", type=float, default=2.0)
+    t.set_defaults(func=cmd_roundtrip)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (2 for bad input, with a one-line message on stderr)."""
-    from virl_quad.demo._quiet import import_pybullet_quietly
+    from virl_quad.quiet import import_pybullet_quietly
 
     import_pybullet_quietly()
     try:

@@ -150,6 +150,7 @@ def _record(env, policy: Callable[[dict], np.ndarray], obs: dict,
     rows, times, feet = [], [], []
 
     def grab() -> None:
+        """Append the current state, feet, demo time (and preview frame)."""
         s = u.state
         rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
         feet.append(u.world.foot_positions())

@@ -8,8 +8,8 @@ Pipeline:
 3. Find the moving subject: median background over time, absolute difference, threshold,
    morphological opening; per frame the subject's centroid and bounding box.
 4. Decide whether to follow it. The sim camera follows the robot, so the video must too:
-   - static background (under ``MOVING_BG`` of the pixels differ from the median) and a subject
-     that travels (a line fit of its centroid moves more than ``TRAVEL`` of the frame): crop a fixed-size
+   - static background (under ``MOVING_BG`` of the pixels differ from the median, and those
+     pixels span at most ``SPREAD`` of the frame) and a subject that travels (a line fit of its centroid moves more than ``TRAVEL`` of the frame): crop a fixed-size
      square around the smoothed centroid, frame by frame, sized so the subject spans the same
      share of it as the robot does in the sim camera's view (:func:`robot_fill`);
    - otherwise the camera already follows the subject (the background moves, e.g. a rendered
@@ -34,7 +34,6 @@ from virl_quad import robots
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.sim.camera import FRAME_SIZE, CameraParams
 
-from virl_quad.demo import VIDEO_SUFFIXES  # noqa: E402,F401  (re-exported)
 WORK_SIZE = 320       # px, largest side kept while processing
 DIFF_THRESHOLD = 25   # gray levels, |frame - background| counted as subject
 MOVING_BG = 0.25      # share of differing pixels above which the background is taken as moving
@@ -54,9 +53,9 @@ def read_video(path: str | os.PathLike, max_seconds: float = MAX_SECONDS) -> tup
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"video file not found: {p}")
-    from virl_quad.demo._quiet import quiet_stderr
+    from virl_quad.quiet import quiet_fd
 
-    with quiet_stderr():  # FFmpeg's own messages about broken files
+    with quiet_fd(2):  # FFmpeg's own messages about broken files
         cap = cv2.VideoCapture(str(p))
     if not cap.isOpened():
         raise ValueError(f"cannot read video {p} (unsupported or corrupt file)")
@@ -66,7 +65,7 @@ def read_video(path: str | os.PathLike, max_seconds: float = MAX_SECONDS) -> tup
     frames = []
     try:
         while len(frames) < max_seconds * fps:
-            with quiet_stderr():
+            with quiet_fd(2):
                 ok, frame = cap.read()
             if not ok or frame is None:
                 break
@@ -139,9 +138,11 @@ def robot_fill(robot: str) -> float:
 
 
 def track_subject(frames: np.ndarray, fill: float = 0.6) -> dict:
-    """Where the subject is: centres (N, 2) px (x, y), crop side (px), and whether to follow it.
+    """Where the moving subject is, and whether to follow it.
 
-    ``fill``: share of the crop side the subject's larger extent should span.
+    Returns ``track`` (N, 2) px (x, y) smoothed centroids (None when no subject is found in a
+    quarter of the frames), ``side`` the crop side (px) at which the subject's median extent spans
+    ``fill`` of it, ``follow`` the decision (see module doc) and the figures behind it.
     """
     n, h, w = frames.shape
     masks = subject_masks(frames)
@@ -158,23 +159,20 @@ def track_subject(frames: np.ndarray, fill: float = 0.6) -> dict:
     # or makes the differing pixels spread over (nearly) the whole frame.
     spread = float(np.median(extents[found])) if found.any() else 0.0
     moving_background = float(np.median(share)) > MOVING_BG or spread > SPREAD
-    follow, travel = False, 0.0
-    side = float(min(h, w))
-    if found.sum() >= max(2, n // 4) and not moving_background:
+    track, side, travel = None, float(min(h, w)), 0.0
+    if found.sum() >= max(2, n // 4):
         idx = np.arange(n)
         for c in range(2):  # fill frames without a subject from their neighbours
             centres[:, c] = np.interp(idx, idx[found], centres[found, c])
         # Net travel: slope of a straight-line fit (periodic limb motion in place averages out).
         slopes = [np.polyfit(idx[found], centres[found, c], 1)[0] for c in range(2)]
         travel = float(max(abs(slopes[0]) * n / w, abs(slopes[1]) * n / h))
-        follow = travel > TRAVEL
-        if follow:
-            side = float(np.clip(np.percentile(extents[found], 90) * max(w, h) / fill, 16, min(h, w)))
-            centres = _smooth(centres, SMOOTH)
-    if not follow:
-        centres = np.tile([(w - 1) / 2.0, (h - 1) / 2.0], (n, 1))
-    return {"centres": centres, "side": side, "follow": follow, "moving_background": moving_background,
-            "subject_share": float(np.median(share)), "spread": spread, "travel": travel}
+        track = _smooth(centres, SMOOTH)
+        side = float(np.clip(np.median(extents[found]) * max(w, h) / fill, 16, min(h, w)))
+    return {"track": track, "side": side, "follow": bool(track is not None and not moving_background
+                                                          and travel > TRAVEL),
+            "moving_background": moving_background, "subject_share": float(np.median(share)),
+            "spread": spread, "travel": travel}
 
 
 def crop_frames(frames: np.ndarray, centres: np.ndarray, side: float, size: int = FRAME_SIZE) -> np.ndarray:
@@ -199,20 +197,21 @@ def import_video(path: str | os.PathLike, robot: str, follow: bool | None = None
     raw, fps_in = read_video(path, max_seconds)
     frames = resample(raw, fps_in, spec.control_hz)
     info = track_subject(frames, robot_fill(robot))
-    if follow is False or (follow is None and not info["follow"]):
-        h, w = frames.shape[1:]
-        info["centres"] = np.tile([(w - 1) / 2.0, (h - 1) / 2.0], (len(frames), 1))
-        info["side"], info["follow"] = float(min(h, w)), False
-    elif follow is True and not info["follow"]:
-        info["follow"] = True
-    out = crop_frames(frames, info["centres"], info["side"])
+    followed = info["follow"] if follow is None else bool(follow)
+    if followed and info["track"] is None:
+        raise ValueError(f"video {path}: no moving subject found to follow")
+    h, w = frames.shape[1:]
+    if followed:
+        centres, side = info["track"], info["side"]
+    else:
+        centres, side = np.tile([(w - 1) / 2.0, (h - 1) / 2.0], (len(frames), 1)), float(min(h, w))
+    out = crop_frames(frames, centres, side)
     cam = CameraParams.from_spec(spec)
     displacement = None
-    if info["follow"]:
+    if followed:
         view = 2.0 * cam.distance * np.tan(np.radians(cam.fov) / 2.0)   # m seen across the sim frame
-        c = info["centres"]
-        displacement = np.column_stack([c[:, 0] - c[0, 0], -(c[:, 1] - c[0, 1])]) / info["side"] * view
+        displacement = np.column_stack([centres[:, 0] - centres[0, 0], -(centres[:, 1] - centres[0, 1])]) / side * view
     camera = dataclasses.asdict(cam)
-    camera.update(imported_fps=fps_in, followed=info["follow"], crop_side_px=info["side"])
+    camera.update(imported_fps=fps_in, followed=followed, crop_side_px=side)
     return Demonstration(frames=out, fps=spec.control_hz, robot=robot, source=str(path), camera=camera,
                          motion=None, loop=True, displacement=displacement)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pybullet
 
-from virl_quad.kinematics._quiet import quiet_fd
+from virl_quad.quiet import quiet_fd
 from virl_quad.kinematics.frames import laikago_clip_root_to_zup, random_quat
 from virl_quad.kinematics.model import Kinematics
 from virl_quad.kinematics.urdf import inertia_validity, read_urdf

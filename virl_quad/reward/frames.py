@@ -73,7 +73,7 @@ def to_mask(m, name: str, shape: tuple[int, ...], device: torch.device | str = "
         raise ValueError(f"{name}: expected a numpy array or torch tensor, got {type(m).__name__}")
     if tuple(m.shape) != tuple(shape):
         raise ValueError(f"{name}: expected shape {list(shape)}, got {list(m.shape)}")
-    t = torch.from_numpy(np.asarray(m)) if isinstance(m, np.ndarray) else m
+    t = torch.from_numpy(np.ascontiguousarray(m)) if isinstance(m, np.ndarray) else m
     if t.dtype != torch.bool:
         if t.is_floating_point() and not bool(torch.isfinite(t).all()):
             raise ValueError(f"{name}: mask contains NaN or inf")

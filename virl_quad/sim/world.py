@@ -17,6 +17,7 @@ import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
+from virl_quad.quiet import quiet_fd
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.sim import camera
 from virl_quad.sim.params import PhysicsParams
@@ -67,7 +68,8 @@ class World:
 
     def __init__(self, spec: RobotSpec, *, ghost: bool = False) -> None:
         self.spec = spec
-        self.bc = BulletClient(connection_mode=pybullet.DIRECT)
+        with quiet_fd(1):  # PyBullet prints 'argv[0]=' from C when it connects
+            self.bc = BulletClient(connection_mode=pybullet.DIRECT)
         self.client = self.bc._client
         bc = self.bc
         bc.setAdditionalSearchPath(pybullet_data.getDataPath())

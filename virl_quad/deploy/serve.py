@@ -1,0 +1,285 @@
+"""Policy server: runs an exported TorchScript policy against a HAL over Zenoh.
+
+    python -m virl_quad.deploy.serve --policy policies/pupper_trot.pt [--robot-id pupper-01]
+
+It waits for the HAL's liveliness token, queries its ANNOUNCE and refuses (one line, exit 2)
+a robot, joint order, control period or protocol version that the policy was not made for.
+Then, for every STATE on ``virl/<id>/state`` it builds the observation with
+:func:`virl_quad.envs.observation.policy_observation` (the training builder), runs the
+policy and publishes a COMMAND on ``virl/<id>/cmd``: ``q_target`` from
+``LoadedPolicy.joint_targets``, ``kp``/``kd`` from the policy metadata, no feed-forward,
+``ref_seq`` = the state's ``seq``. The demonstration phase is the server's own step
+counter: ``phase = (k % demo_frames) / demo_frames`` (0 without a demonstration).
+
+States with NaN/inf or a non-unit quaternion are skipped (not answered) and counted; so
+are undecodable or reordered ones. When the HAL's token disappears the server stops
+commanding and waits for it to come back (then checks its ANNOUNCE again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from virl_quad.cli import UserError, run_main
+from virl_quad.deploy import protocol as P
+from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
+from virl_quad.deploy.protocol import JointCommand, MsgType, ProtocolError
+from virl_quad.envs.observation import policy_observation
+
+#: The policy served when --policy is not given (written by the training pipeline).
+DEFAULT_POLICY = Path(__file__).resolve().parents[2] / "policies" / "pupper_trot.pt"
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"     # the HAL's listen endpoint in deploy/zenoh/peer.json5
+
+
+@dataclass
+class ServeConfig:
+    """Settings of one policy-server process."""
+
+    policy: str = str(DEFAULT_POLICY)    # exported policy NAME.pt (NAME.json beside it)
+    robot_id: str | None = None          # HAL's robot id; default "<policy robot>-01"
+    zenoh: str = "peer"                  # Zenoh config: name in deploy/zenoh/ or a .json5 path
+    connect: list[str] | None = None     # connect endpoints; default the config's, else DEFAULT_CONNECT
+    listen: list[str] | None = None      # listen endpoints; default none
+    wait: float = 30.0                   # s to wait for the HAL at start (0: forever)
+    threads: int = 1                     # torch intra-op threads (1 is fastest for small MLPs)
+    quiet: bool = False                  # no log lines on stderr
+
+
+class PolicyRunner:
+    """State bytes in, command bytes out: the policy side of the protocol, without Zenoh."""
+
+    def __init__(self, policy: Any) -> None:
+        """``policy``: a :class:`virl_quad.policy_io.LoadedPolicy`."""
+        self.policy = policy
+        self.spec = policy.spec
+        meta = policy.meta
+        self.kp = np.asarray(meta["kp"], dtype=np.float64)            # N·m/rad
+        self.kd = np.asarray(meta["kd"], dtype=np.float64)            # N·m·s/rad
+        self.action_clip = float(meta["action_clip"])
+        self.frames = policy.demo_frames
+        self.counts: Counter[str] = Counter()   # served, skipped reasons
+        self._lock = threading.Lock()
+        self._seq = P.SeqCounter()
+        self.reset()
+
+    def reset(self) -> None:
+        """Start again: step counter 0, last action 0 (a new HAL session)."""
+        with self._lock:
+            self.k = 0                                  # commands sent: demonstration clock
+            self.last_action = np.zeros(P.NUM_JOINTS)   # clipped, unscaled (as in training)
+            self.last_state_seq = -1
+
+    def phase(self) -> float | None:
+        """Demonstration phase in [0, 1) of the next command (None if the policy has none)."""
+        if not self.policy.with_phase:
+            return None
+        return (self.k % self.frames) / self.frames if self.frames > 0 else 0.0
+
+    def handle(self, data: bytes) -> tuple[bytes | None, str]:
+        """One STATE message -> (COMMAND message or None, skip reason or "").
+
+        Never raises: malformed, reordered or non-finite states are skipped with a reason."""
+        try:
+            msg = P.decode(data, expect=MsgType.STATE)
+        except ProtocolError as e:
+            return self._skip(f"bad_message:{e.reason}")
+        st = msg.body
+        with self._lock:
+            if msg.seq <= self.last_state_seq:
+                return self._skip("stale_state")
+            quat = np.asarray(st.quat, dtype=np.float64)
+            fields = (st.q, st.dq, st.gyro, quat)
+            if not all(np.all(np.isfinite(f)) for f in fields):
+                return self._skip("non_finite_state")
+            if not 0.9 < float(np.linalg.norm(quat)) < 1.1:
+                return self._skip("bad_quaternion")
+            self.last_state_seq = msg.seq
+            try:
+                obs = policy_observation(self.spec, quat / np.linalg.norm(quat), st.gyro, st.q, st.dq,
+                                         self.last_action, self.phase())
+                action = self.policy.act(obs)
+            except ValueError:                                  # NaN/inf observation or action
+                return self._skip("policy_non_finite")
+            q_target = self.policy.joint_targets(action)        # rad, within the joint limits
+            self.last_action = np.clip(action, -self.action_clip, self.action_clip)
+            self.k += 1
+            cmd = JointCommand(q_target, self.kp, self.kd, np.zeros(P.NUM_JOINTS), ref_seq=msg.seq)
+            out = P.encode_command(cmd, self._seq())
+        self.counts["served"] += 1
+        return out, ""
+
+    def _skip(self, reason: str) -> tuple[None, str]:
+        self.counts[reason] += 1
+        return None, reason
+
+
+def check_announce(body: Any, meta: dict[str, Any], robot_id: str) -> str:
+    """'' if the HAL's ANNOUNCE matches the policy metadata, else what differs (one line)."""
+    if not isinstance(body, dict):
+        return "the HAL's announce is not a JSON object"
+    checks = [
+        ("protocol_version", body.get("protocol_version"), P.PROTOCOL_VERSION),
+        ("robot", body.get("robot"), meta.get("robot")),
+        ("robot_id", body.get("robot_id"), robot_id),
+        ("joint_order", body.get("joint_order"), meta.get("joint_names")),
+    ]
+    for name, got, want in checks:
+        if got != want:
+            return f"HAL {name} {got!r} does not match the policy's {want!r}"
+    dt = body.get("control_dt")
+    if not isinstance(dt, (int, float)) or abs(float(dt) - float(meta.get("control_dt", -1))) > 1e-9:
+        return f"HAL control_dt {dt!r} s does not match the policy's {meta.get('control_dt')!r} s"
+    return ""
+
+
+def query_announce(session: zenoh.Session, robot_id: str, timeout: float = 2.0) -> dict[str, Any] | None:
+    """The HAL's ANNOUNCE body, or None if no valid reply came within ``timeout`` s."""
+    for reply in session.get(P.key(robot_id, "announce"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        try:
+            msg = P.decode(reply.ok.payload, expect=MsgType.ANNOUNCE)
+        except ProtocolError:
+            continue
+        return msg.body  # type: ignore[return-value]
+    return None
+
+
+class Server:
+    """Zenoh side of the policy server: HAL presence, announce check, state -> command."""
+
+    def __init__(self, runner: PolicyRunner, session: zenoh.Session, robot_id: str, log: Log) -> None:
+        self.runner, self.session, self.robot_id, self.log = runner, session, robot_id, log
+        self.enabled = threading.Event()       # HAL present and its announce checked
+        self.hal_seen = threading.Event()      # alive/hal token present (set by the callback)
+        self.errors = 0
+        self.cmd_pub = SeqPublisher(session, robot_id, "cmd")
+        self._entities: list[Any] = [self.cmd_pub]
+        self._entities.append(session.liveliness().declare_subscriber(
+            P.liveliness_key(robot_id, "hal"), self._on_hal, history=True))
+        self._entities.append(session.declare_subscriber(P.key(robot_id, "state"), self._on_state))
+
+    def _on_hal(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.hal_seen.set()
+        else:
+            self.hal_seen.clear()
+            if self.enabled.is_set():
+                self.enabled.clear()
+                self.log("HAL gone: not sending commands")
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        if not self.enabled.is_set():
+            return
+        try:
+            out, reason = self.runner.handle(sample.payload.to_bytes())
+            if out is not None:
+                self.cmd_pub.pub.put(out)
+            elif reason:
+                self.log.once(reason, f"skipping state(s): {reason} (counted)")
+        except Exception as e:   # never crash in a callback: count, log once
+            self.errors += 1
+            self.log.once(f"err-{type(e).__name__}", f"error while serving a state (counted): {e!r}")
+
+    def verify(self, timeout: float) -> bool:
+        """Query the HAL's announce and check it; raise UserError on a mismatch."""
+        body = query_announce(self.session, self.robot_id, timeout)
+        if body is None:
+            return False
+        problem = check_announce(body, self.runner.policy.meta, self.robot_id)
+        if problem:
+            raise UserError(problem)
+        return True
+
+    def run(self, stop: StopFlag, wait: float) -> None:
+        """Serve until ``stop``; UserError if no HAL shows up within ``wait`` s (0: forever)."""
+        deadline = time.monotonic() + wait if wait > 0 else float("inf")
+        token = None
+        while not stop.is_set():
+            if not self.enabled.is_set() and self.hal_seen.is_set() and self.verify(timeout=2.0):
+                self.runner.reset()
+                if token is None:
+                    token = self.session.liveliness().declare_token(P.liveliness_key(self.robot_id, "policy"))
+                    self._entities.append(token)
+                self.enabled.set()
+                self.log(f"serving robot {self.robot_id!r}")
+            if token is None and time.monotonic() > deadline:
+                raise UserError(f"no HAL for robot id {self.robot_id!r} answered within {wait:g} s")
+            stop.wait(0.05)
+
+    def close(self) -> None:
+        """Stop serving and undeclare everything (never raises)."""
+        self.enabled.clear()
+        undeclare_all(self._entities)
+
+
+def load(path: str) -> Any:
+    """Load and check a policy; ValueError (one line) for a missing or bad file."""
+    from virl_quad.policy_io import load_policy
+
+    if not Path(path).is_file():
+        raise UserError(f"policy file {path} does not exist (train and export one, or pass --policy)")
+    try:
+        return load_policy(path)
+    except (KeyError, TypeError, AttributeError) as e:   # metadata with missing or mistyped members
+        raise UserError(f"policy metadata of {path} is incomplete ({type(e).__name__}: {e})") from None
+
+
+def main(config: ServeConfig) -> int:
+    """Serve ``config.policy`` until SIGINT/SIGTERM; returns the exit code (bad input: UserError,
+    ValueError or FileNotFoundError, printed as one line with exit code 2 by run_main)."""
+    import torch
+
+    torch.set_num_threads(max(1, config.threads))
+    policy = load(config.policy)
+    robot_id = P.check_robot_id(config.robot_id or f"{policy.meta['robot']}-01")
+    conf = open_config(config.zenoh, listen=config.listen or [], connect=config.connect)
+    if not config.connect and conf.get_json("connect/endpoints").strip() in ("[]", "null"):
+        conf.insert_json5("connect/endpoints", f'["{DEFAULT_CONNECT}"]')
+    log = Log("serve", quiet=config.quiet)
+    zenoh.init_log_from_env_or("error")
+    runner = PolicyRunner(policy)
+    log(f"policy {config.policy} for {policy.meta['robot']} ({len(policy.meta['joint_names'])} joints, "
+        f"{1 / float(policy.meta['control_dt']):g} Hz, demo frames {runner.frames}); waiting for HAL {robot_id!r}")
+    with StopFlag() as stop:
+        with open_session(conf) as session:
+            server = Server(runner, session, robot_id, log)
+            try:
+                server.run(stop, config.wait)
+            finally:
+                server.close()
+                session.close()
+    skipped = {k: v for k, v in runner.counts.items() if k != "served"}
+    log(f"stopped: {runner.counts['served']} commands sent, skipped {skipped or 'none'}, errors {server.errors}")
+    return 0
+
+
+def config_from_args(argv: list[str] | None = None) -> ServeConfig:
+    """Parse the command line into a :class:`ServeConfig`."""
+    p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.serve", description=__doc__.split("\n\n")[0])
+    p.add_argument("--policy", default=str(DEFAULT_POLICY), help="exported policy NAME.pt (default %(default)s)")
+    p.add_argument("--robot-id", help="the HAL's robot id (default <policy robot>-01)")
+    p.add_argument("--zenoh", default="peer", help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    p.add_argument("--connect", action="append", help=f"endpoint of the HAL (repeatable; default the config's, "
+                   f"else {DEFAULT_CONNECT})")
+    p.add_argument("--listen", action="append", help="listen endpoint (repeatable; default none)")
+    p.add_argument("--wait", type=float, default=30.0, help="s to wait for the HAL at start (0: forever)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument("--quiet", action="store_true", help="no log lines")
+    a = p.parse_args(sys.argv[1:] if argv is None else argv)
+    return ServeConfig(policy=a.policy, robot_id=a.robot_id, zenoh=a.zenoh, connect=a.connect, listen=a.listen,
+                       wait=a.wait, threads=a.threads, quiet=a.quiet)
+
+
+if __name__ == "__main__":
+    run_main(lambda: main(config_from_args()))
