@@ -87,7 +87,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
                           oracle_reward=oracle)
     source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
-                                                      args.reward_updates, args.seed, args.device)
+                                                      args.reward_updates, args.seed, args.device,
+                                                      lr=args.reward_lr, cyclic=demo.loop)
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

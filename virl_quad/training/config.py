@@ -35,6 +35,7 @@ class TrainArgs:
     episode_seconds: float = 10.0      # s, training episode time limit
     randomize: bool = True             # domain randomisation during training
     reward_updates: int = 4            # distance-model batch updates per iteration (M in Algorithm 1)
+    reward_lr: float = 1e-4            # distance-model Adam learning rate (slow: a fast model saturates the reward)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus
     init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)

@@ -38,8 +38,10 @@ class LearnedReward:
     """Algorithm 1's reward: a distance model trained online beside the policy."""
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
-                 device: str = "cpu", other_clips: list[np.ndarray] | None = None) -> None:
-        self.model = build_reward(RewardConfig(variant=variant), demo_frames, other_clips, seed, device)
+                 device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
+                 cyclic: bool = False) -> None:
+        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic)
+        self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
