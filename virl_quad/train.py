@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -113,6 +114,7 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     print(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
           f"run_dir={run_dir}", flush=True)
     demo, env, runner = build(args, run_dir, data)
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` checkpoints like Ctrl-C
     try:
         if data is not None:
             runner.restore(data)
@@ -126,6 +128,10 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         env.close()
     finish(args, run_dir, demo, runner)
     return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
