@@ -1,0 +1,92 @@
+"""Throughput of the whole training loop and the share of each phase (run by hand).
+
+    python bench/train_throughput.py [--robot pupper] [--reward virl] [--iterations 5]
+
+Prints env steps/s of Algorithm 1 (rollout + distance-model updates + reward
+recomputation + PPO update), each phase's share of the iteration, and the
+ratio to the bare VecEnv throughput (same envs and workers, zero actions, no
+learning) measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+from virl_quad.envs.vec_env import QuadrupedVecEnv
+from virl_quad.train import build
+from virl_quad.training.config import TrainArgs
+
+
+def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int) -> float:
+    """Env steps/s of the VecEnv alone (zero actions), same configuration as training."""
+    env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=workers, seed=1, demo=demo,
+                          randomize=args.randomize)
+    a = torch.zeros(args.num_envs, 12)
+    env.step(a)
+    t = time.perf_counter()
+    for _ in range(steps):
+        env.step(a)
+    rate = args.num_envs * steps / (time.perf_counter() - t)
+    env.close()
+    return rate
+
+
+def main(robot: str, reward: str, iterations: int, num_envs: int, steps_per_env: int, workers: int) -> None:
+    """Measure and print."""
+    torch.set_num_threads(1)
+    args = TrainArgs(robot=robot, reward=reward, num_envs=num_envs, steps_per_env=steps_per_env,
+                     num_workers=workers)
+    with tempfile.TemporaryDirectory() as tmp:
+        demo, env, runner = build(args, Path(tmp), None)
+        phases = {"rollout": 0.0, "distance-model updates": 0.0, "reward recompute": 0.0, "PPO update": 0.0}
+        obs = env.get_observations()
+        runner.alg.train_mode()
+        runner._rollout(obs)  # warm-up iteration (not timed)
+        with torch.inference_mode():
+            runner.alg.compute_returns(env.get_observations())
+        runner.alg.update()
+        t_all = time.perf_counter()
+        for _ in range(iterations):
+            t0 = time.perf_counter()
+            obs = runner._rollout(env.get_observations())
+            t1 = time.perf_counter()
+            with torch.inference_mode():
+                runner.alg.compute_returns(obs)
+            t2 = time.perf_counter()
+            runner.alg.update()
+            t3 = time.perf_counter()
+            info = runner.alg.last_reward_info
+            upd = info.get("time/distance_update_s", 0.0)
+            phases["rollout"] += t1 - t0
+            phases["distance-model updates"] += upd
+            phases["reward recompute"] += (t2 - t1) - upd
+            phases["PPO update"] += t3 - t2
+        total = time.perf_counter() - t_all
+        env.close()
+        steps = iterations * num_envs * steps_per_env
+        train_rate = steps / total
+        bare = bare_vec_env_rate(args, demo, workers, steps_per_env * 2)
+    print(f"{robot}, reward {reward}: {num_envs} envs x {steps_per_env} steps, {workers} worker(s), "
+          f"{iterations} iterations")
+    print(f"  training loop       : {train_rate:8.1f} env steps/s")
+    print(f"  bare VecEnv         : {bare:8.1f} env steps/s")
+    print(f"  ratio loop / bare   : {train_rate / bare:8.2f}")
+    for name, sec in phases.items():
+        print(f"  {name:22s}: {sec / iterations:6.2f} s/iteration  {100 * sec / total:5.1f} %")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="pupper")
+    parser.add_argument("--reward", default="virl")
+    parser.add_argument("--iterations", type=int, default=5)
+    parser.add_argument("--num-envs", type=int, default=16)
+    parser.add_argument("--steps-per-env", type=int, default=64)
+    parser.add_argument("--workers", type=int, default=2)
+    a = parser.parse_args()
+    main(a.robot, a.reward, a.iterations, a.num_envs, a.steps_per_env, a.workers)
