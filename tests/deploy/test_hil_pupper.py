@@ -8,7 +8,7 @@ run independent of machine load: no assertion depends on wall-clock timing, only
 (a) the policy drives the Pupper for 10 s of sim time: every applied command is safe, the
     robot stays up; with the trained ``policies/pupper_trot.pt`` it must also move forward
 (b) SIGKILL of the server -> DAMPING after 3 held periods (seen in STATUS); a restarted
-    server drives the robot again only after a re-arm (simulated Laikago, see the test)
+    server drives the robot again only after a re-arm
 (c) E-stop (also with an undecodable payload) damps and latches; bad commands are counted
 (+) CLI errors: one line on stderr, exit code 2
 """
@@ -53,9 +53,9 @@ def _logs(*procs: Proc) -> str:
 class Rig:
     """A lock-step sim HAL + a monitor session (+ servers started by the test); cleans up."""
 
-    def __init__(self, *hal_args: str, robot: str = "pupper") -> None:
+    def __init__(self, *hal_args: str, lockstep: bool = True) -> None:
         self.ep = _endpoint()
-        self.hal = start_hal(self.ep, ROBOT_ID, *LOCKSTEP, *hal_args, robot=robot)
+        self.hal = start_hal(self.ep, ROBOT_ID, *(LOCKSTEP if lockstep else ()), *hal_args)
         self.mon = Monitor.peer(self.ep, ROBOT_ID)
         self.procs = [self.hal]
 
@@ -82,8 +82,8 @@ class Rig:
 def rig_factory():
     rigs: list[Rig] = []
 
-    def make(*hal_args: str, robot: str = "pupper") -> Rig:
-        rigs.append(Rig(*hal_args, robot=robot))
+    def make(*hal_args: str, lockstep: bool = True) -> Rig:
+        rigs.append(Rig(*hal_args, lockstep=lockstep))
         return rigs[-1]
 
     yield make
@@ -160,18 +160,13 @@ def test_trained_policy_moves_forward(drive):
 
 # ----------------------------------------------------------------------------- (b) server killed
 
-@pytest.fixture(scope="module")
-def laikago_policy(tmp_path_factory):
-    """An untrained Laikago policy (see test (b) for why Laikago)."""
-    return export_untrained(tmp_path_factory.mktemp("hil_laikago"), "laikago")
-
-
-def test_killed_server_damps_within_3_periods_and_restart_needs_rearm(laikago_policy, rig_factory):
-    """On the simulated Laikago: after DAMPING the sim Pupper ends in a crouch from which the
-    safety layer's joint-space RAMP pitches it past its 0.4 rad tilt limit (a fault, by design
-    of the safety layer), so "drives again after re-arm" cannot be shown on the Pupper."""
-    rig = rig_factory("--arm", robot="laikago")
-    srv = rig.server(laikago_policy)
+def test_killed_server_damps_within_3_periods_and_restart_needs_rearm(policy, rig_factory):
+    """``--reset-on-arm``: a damped sim Pupper collapses into a crouch from which the safety
+    layer's joint-space RAMP pitches it past its 0.4 rad tilt limit (a tilt fault, correctly),
+    so the simulated operator puts it back on its feet when re-arming, as one would by hand."""
+    path, _ = policy
+    rig = rig_factory("--arm", "--reset-on-arm")
+    srv = rig.server(path)
     st = rig.wait(lambda s: s["mode"] == "ACTIVE" and s["applied"] >= 25, "ACTIVE with 25 commands applied")
     srv.popen.kill()                                         # SIGKILL: no goodbye
     srv.wait(30)
@@ -182,7 +177,7 @@ def test_killed_server_damps_within_3_periods_and_restart_needs_rearm(laikago_po
     assert st["fault_tick"] - st["cmd_tick"] == held + 1, st
     applied = st["applied"]
     # a restarted server talks to the HAL (commands accepted) but nothing is applied until ARM
-    rig.server(laikago_policy)
+    rig.server(path)
     acc = st["accepted"]
     st = rig.wait(lambda s: s["accepted"] >= acc + 50 and s["policy_alive"], "the new server's commands")
     assert st["mode"] == "DAMPING" and st["applied"] == applied, st
@@ -220,7 +215,22 @@ def test_estop_damps_and_latches_bad_input_is_counted(policy, rig_factory):
     rig.mon.session.put(P.key(ROBOT_ID, "estop"), b"garbage")            # any payload is an E-stop
     st = rig.wait(lambda s: s["events"]["estop"] == 2, "the garbage E-stop")
     assert st["rejected_other"].get("estop:bad_size") == 1 and st["mode"] == "DAMPING", st
-    assert rig.hal.alive() and rig.hal.stop() == 0, rig.logs()
+    assert rig.hal.alive() and rig.hal.stop(signal.SIGTERM) == 0, rig.logs()
+    assert "hal: stopped: mode DAMPING" in rig.hal.output()
+
+
+def test_real_time_loop_serves_state_and_obeys_the_operator(rig_factory):
+    """The fixed-rate loop (no lock-step, no policy): states flow, ARM ramps, E-stop damps."""
+    rig = rig_factory(lockstep=False)
+    st = rig.wait(lambda s: s["ticks"] >= 10 and s["t"] > 0, "a running real-time loop")
+    assert st["mode"] == "IDLE" and st["lockstep"] is False, st
+    assert rig.mon.state is not None and rig.mon.state.base_pos is not None    # sim: HAS_BASE
+    rig.mon.arm()
+    rig.wait(lambda s: s["mode"] == "RAMP", "RAMP after ARM")
+    rig.mon.estop("rt")
+    st = rig.wait(lambda s: s["mode"] == "DAMPING", "DAMPING after the E-stop")
+    assert st["fault"] == "estop: rt" and st["accepted"] == 0, st
+    assert rig.hal.stop(signal.SIGTERM) == 0, rig.logs()
 
 
 # ----------------------------------------------------------------------------- CLI errors

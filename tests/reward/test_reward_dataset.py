@@ -53,6 +53,10 @@ def test_add_rollout_splits_on_dones_and_joins_across_rollouts():
     assert store.add_rollout(agent, agent, dones) == 2
     assert sorted(store.lengths().tolist()) == [3, 6]
     assert store.num_frames == T * N                     # open pieces (env 0: 3, env 2: 6) are counted
+    seqs = store.sequences()                             # open episodes can be sampled already
+    assert sorted(a.shape[0] for a, _ in seqs) == [3, 3, 6, 6]
+    open_env2 = [a for a, _ in seqs if a.shape[0] == 6 and a[0, 0, 0] == 2]
+    assert len(open_env2) == 1 and open_env2[0][:, 0, 0].tolist() == [10 * t + 2 for t in range(T)]
     # the next rollout continues the open episodes of env 0 and env 2
     dones2 = np.zeros((T, N), bool)
     dones2[0, 2] = True
@@ -72,3 +76,20 @@ def test_long_episodes_are_cut_and_open_pieces_respect_the_bound():
     frames = np.zeros((6, 4, 48, 48), np.uint8)
     store.add_rollout(frames, frames, np.zeros((6, 4), bool))   # 24 open frames > budget of 10
     assert store.nbytes <= store.max_bytes
+
+
+def test_open_episodes_train_the_model_before_any_episode_ends(small_cfg, demo, agent_episode):
+    """A first rollout shorter than every episode still gives agent data (incl. expert-vs-agent pairs)."""
+    from virl_quad.reward import RewardConfig, build_reward
+
+    agent, expert = agent_episode(0, T=24)
+    rollout = np.stack([agent, agent[::-1]], axis=1), np.stack([expert, expert], axis=1)
+    for variant in ("virl", "gaifo"):
+        rm = build_reward(RewardConfig(**{**small_cfg.to_dict(), "variant": variant}), demo, seed=0)
+        rm.add_rollout(*rollout, np.zeros((24, 2), bool))
+        assert len(rm.dataset) == 0 and len(rm.dataset.sequences()) == 2
+        assert rm.update(2)["total"] > 0
+    rm = build_reward(small_cfg, demo, seed=0)
+    rm.add_rollout(*rollout, np.zeros((24, 2), bool))
+    rng = np.random.default_rng(0)
+    assert any("expert_vs_agent" in rm.sampler.draw(rng).kinds for _ in range(20))

@@ -118,3 +118,15 @@ def test_overfit_one_fixed_batch(demo, other, agent_episode):
         opt.step()
     last = np.mean([total_loss(rm.net, a, b, y)[1]["total"] for _ in range(5)])
     assert last <= first / 10, (first, last)
+
+
+def test_unique_frames_encodes_each_distinct_frame_once():
+    from virl_quad.reward.losses import unique_frames
+
+    x = torch.rand(5, 48, 48)
+    frames = torch.cat([x, x.flip(0), x[2:3].expand(3, 48, 48)])   # 13 slots, 5 distinct frames
+    uniq, inv = unique_frames(frames)
+    assert uniq.shape[0] == 5 and torch.equal(uniq[inv], frames)
+    y = torch.rand(4, 48, 48)
+    uniq, inv = unique_frames(y)
+    assert uniq.shape[0] == 4 and torch.equal(uniq[inv], y)

@@ -4,6 +4,12 @@
 - :mod:`virl_quad.deploy.safety`       IDLE -> RAMP -> ACTIVE -> DAMPING, command validation
 - :mod:`virl_quad.deploy.backends`     ``Backend`` interface, ``get_backend(name, **kw)``
 - :mod:`virl_quad.deploy.zenoh_config` ``load_config("peer" | "secure" | ..., listen=, connect=)``
+- :mod:`virl_quad.deploy.hal`          ``python -m virl_quad.deploy.hal``: robot + safety layer on Zenoh
+- :mod:`virl_quad.deploy.serve`        ``python -m virl_quad.deploy.serve``: TorchScript policy server
+- :mod:`virl_quad.deploy.operator`     ``python -m virl_quad.deploy.operator status|arm|estop``
+- :mod:`virl_quad.deploy.harness`      real-process helpers for hardware-in-the-loop tests and benches
+
+Usage: ``deploy/README.md``.
 
 Importing this package does not import zenoh or pyserial.
 """

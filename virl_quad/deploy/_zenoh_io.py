@@ -13,7 +13,6 @@ from __future__ import annotations
 import signal
 import sys
 import threading
-import time
 from typing import Any, Callable, Iterable, Sequence
 
 import zenoh
@@ -132,8 +131,3 @@ def undeclare_all(entities: Iterable[Any]) -> None:
             e.undeclare()
         except Exception:
             pass
-
-
-def monotonic() -> float:
-    """Monotonic clock, s."""
-    return time.monotonic()

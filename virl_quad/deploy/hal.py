@@ -39,13 +39,13 @@ import zenoh
 from virl_quad import robots
 from virl_quad.cli import UserError, run_main
 from virl_quad.deploy import protocol as P
+from virl_quad.deploy._record import Recorder
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
 from virl_quad.deploy.backends import Backend, BackendError, backend_names, get_backend
 from virl_quad.deploy.protocol import JointCommand, MsgType, RobotState
 from virl_quad.deploy.safety import Mode, SafetyConfig, SafetyController
 
 _REF_SEQ = struct.Struct("<Q")          # COMMAND payload offset 0: ref_seq
-MODES: tuple[str, ...] = tuple(m.value for m in Mode)
 
 
 @dataclass
@@ -62,40 +62,15 @@ class HalConfig:
     lockstep_timeout: float | None = None  # s without an answer before ticking anyway; None: 3 x control_dt
     cmd_wait: float = 0.5                # real time: fraction of control_dt to wait for the answer
     arm: bool = False                    # arm at start (IDLE -> RAMP without an operator ARM)
+    reset_on_arm: bool = False           # sim: an accepted ARM first puts the robot back on its feet
     randomize: bool = False              # sim: draw physics parameters (domain randomisation)
     seed: int = 0                        # sim: randomisation seed
     port: str | None = None              # pupper_serial: serial port, e.g. /dev/ttyACM0
     status_hz: float = 5.0               # STATUS rate, Hz (also sent on every mode change)
-    record: str | None = None            # write every tick (state, applied command, mode) to this .npz
+    record: str | None = None            # write the last 30000 ticks (state, applied command, mode) to this .npz
     max_ticks: int = 0                   # stop after this many control periods (0: until SIGINT/SIGTERM)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     quiet: bool = False                  # no log lines on stderr
-
-
-class Recorder:
-    """Per-tick log of what the HAL measured and applied (kept in memory, saved as .npz)."""
-
-    def __init__(self, maxlen: int = 200_000) -> None:
-        self.rows: deque[tuple[Any, ...]] = deque(maxlen=maxlen)
-
-    def add(self, state: RobotState | None, mode: Mode, cmd: JointCommand, tick: int) -> None:
-        """Remember one tick: the state it started from and the command applied."""
-        nan = np.full(3, np.nan)
-        if state is None:
-            q, quat, pos, t = np.full(12, np.nan), np.full(4, np.nan), nan, np.nan
-        else:
-            q, quat, t = state.q, state.quat, state.timestamp
-            pos = state.base_pos if state.base_pos is not None else nan
-        self.rows.append((tick, t, MODES.index(mode.value), cmd.q_target, cmd.kp, cmd.kd, cmd.tau_ff, q, quat, pos))
-
-    def save(self, path: str, spec: Any) -> None:
-        """Write the arrays (tick, t [s], mode [index into modes], q_target, kp, kd, tau_ff,
-        q [rad], quat [xyzw], base_pos [m]) to ``path``."""
-        cols = list(zip(*self.rows)) if self.rows else [[]] * 10
-        names = ("tick", "t", "mode", "q_target", "kp", "kd", "tau_ff", "q", "quat", "base_pos")
-        arrays = {n: np.asarray(c, dtype=np.float64 if n not in ("tick", "mode") else np.int64)
-                  for n, c in zip(names, cols)}
-        np.savez(path, **arrays, modes=np.array(MODES), robot=spec.name, control_dt=spec.control_dt)
 
 
 class Hal:
@@ -119,6 +94,7 @@ class Hal:
         self._cv = threading.Condition()
         self._resp_ref = 0           # highest ref_seq of an accepted command
         self._resp_any = 0           # accepted commands with ref_seq 0 (unknown)
+        self._arms: deque[bytes] = deque(maxlen=16)   # ARM payloads, handled in the loop thread
         self._announce = P.announce_body(spec, robot_id)
         k = lambda topic: P.key(robot_id, topic)  # noqa: E731
         self.state_pub = SeqPublisher(session, robot_id, "state")
@@ -175,10 +151,21 @@ class Hal:
         self._guard("estop", self.ctl.receive_estop, sample.payload.to_bytes())
 
     def _on_arm(self, sample: zenoh.Sample) -> None:
-        def arm(data: bytes) -> None:
-            ok = self.ctl.receive_arm(data, self.robot_id)
+        self._guard("arm", lambda: self._arms.append(sample.payload.to_bytes()))
+
+    def _handle_arms(self) -> None:
+        """ARMs are handled at the start of a period, in the loop thread, so that the sim can
+        be reset (``reset_on_arm``) before the tick that starts the ramp measures the pose."""
+        while self._arms:
+            ok = self.ctl.receive_arm(self._arms.popleft(), self.robot_id)
             self.log("ARM accepted" if ok else "ARM ignored (see STATUS rejected_other / events)")
-        self._guard("arm", arm, sample.payload.to_bytes())
+            if ok and self.config.reset_on_arm:
+                try:
+                    self.backend.reset()           # type: ignore[attr-defined]  (sim only)
+                    self.log("simulated robot put back on its feet")
+                except Exception as e:
+                    self.errors["reset"] += 1
+                    self.log.once("reset", f"sim reset failed (counted): {e}")
 
     def _on_announce_query(self, query: zenoh.Query) -> None:
         def reply(q: zenoh.Query) -> None:
@@ -225,6 +212,18 @@ class Hal:
             self.errors["write_command"] += 1
             self.log.once(f"write-{type(e).__name__}", f"backend write failed (counted): {e}")
 
+    def _publish_state(self, state: RobotState | None) -> int | None:
+        """Publish ``state``; its sequence number, or None if there is none to publish."""
+        if state is None:
+            return None
+        try:
+            self.last_t = float(state.timestamp)
+            return self.state_pub.put(lambda s: P.encode_state(state, s))
+        except Exception as e:   # a malformed state from a driver: the tick will judge it
+            self.errors["publish_state"] += 1
+            self.log.once(f"pub-{type(e).__name__}", f"could not publish a state (counted): {e}")
+            return None
+
     def _wait_answer(self, seq: int, any_before: int, deadline: float, stop: StopFlag) -> bool:
         """Wait until a command answering state ``seq`` was accepted, or ``deadline``."""
         with self._cv:
@@ -248,13 +247,11 @@ class Hal:
         mode = self.ctl.mode
         while not stop.is_set():
             t0 = time.monotonic()
+            self._handle_arms()
             state = self._read()
             with self._cv:
                 any_before = self._resp_any
-            seq = None
-            if state is not None:
-                self.last_t = float(state.timestamp)
-                seq = self.state_pub.put(lambda s: P.encode_state(state, s))
+            seq = self._publish_state(state)
             wait = (dt if absent else self.lockstep_timeout) if cfg.lockstep else cfg.cmd_wait * dt
             answered = seq is not None and self._wait_answer(seq, any_before, t0 + wait, stop)
             if stop.is_set():
@@ -268,7 +265,7 @@ class Hal:
             if self.ctl.applied > applied_before:
                 self.cmd_tick = self.ctl.ticks
             if self.recorder is not None:
-                self.recorder.add(state, self.ctl.mode, cmd, self.ctl.ticks)
+                self._guard("record", self.recorder.add, state, self.ctl.mode, cmd, self.ctl.ticks)
             if self.ctl.mode != mode:
                 if self.ctl.mode == Mode.DAMPING:
                     self.fault_tick = self.ctl.ticks
@@ -308,6 +305,8 @@ def backend_kwargs(config: HalConfig, spec: Any) -> dict[str, Any]:
         kw.update(randomize=config.randomize, seed=config.seed)
     elif config.randomize:
         raise UserError("--randomize works with the sim backend only")
+    if config.reset_on_arm and config.backend != "sim":
+        raise UserError("--reset-on-arm works with the sim backend only")
     if config.backend == "pupper_serial":
         if not config.port:
             raise UserError("the pupper_serial backend needs --port (e.g. /dev/ttyACM0)")
@@ -370,6 +369,8 @@ def config_from_args(argv: list[str] | None = None) -> HalConfig:
     p.add_argument("--cmd-wait", type=float, default=0.5, help="real time: fraction of a period to wait for "
                    "the answer to the state (default 0.5)")
     p.add_argument("--arm", action="store_true", help="arm at start (IDLE -> RAMP) without an operator ARM")
+    p.add_argument("--reset-on-arm", action="store_true", help="sim: an accepted ARM first puts the robot "
+                   "back on its feet (as an operator would)")
     p.add_argument("--randomize", action="store_true", help="sim: randomise the physics (seed --seed)")
     p.add_argument("--seed", type=int, default=0, help="sim: randomisation seed")
     p.add_argument("--port", help="pupper_serial: serial port of the motor board")
@@ -380,8 +381,9 @@ def config_from_args(argv: list[str] | None = None) -> HalConfig:
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
     return HalConfig(robot=a.robot, backend=a.backend, robot_id=a.robot_id, zenoh=a.zenoh, listen=a.listen,
                      connect=a.connect, lockstep=a.lockstep, lockstep_timeout=a.lockstep_timeout,
-                     cmd_wait=a.cmd_wait, arm=a.arm, randomize=a.randomize, seed=a.seed, port=a.port,
-                     status_hz=a.status_hz, record=a.record, max_ticks=a.max_ticks, quiet=a.quiet)
+                     cmd_wait=a.cmd_wait, arm=a.arm, reset_on_arm=a.reset_on_arm, randomize=a.randomize,
+                     seed=a.seed, port=a.port, status_hz=a.status_hz, record=a.record, max_ticks=a.max_ticks,
+                     quiet=a.quiet)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 - :func:`start_hal`, :func:`start_server`: ``python -m virl_quad.deploy.hal|serve`` as
   subprocesses, output captured to a file (no pipe can fill up and block them)
-- :class:`Monitor`: an operator's Zenoh session: latest STATUS / STATE, ARM, E-stop
+- :class:`Monitor` (= :class:`virl_quad.deploy.operator.Operator`): newest STATUS, ARM, E-stop
 - :func:`policy_for_tests`: the trained ``policies/pupper_trot.pt`` if present, else an
   untrained export (same format and metadata) in a given folder
 """
@@ -15,29 +15,15 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
-import time
 from pathlib import Path
-from typing import Any, Callable
 
-import zenoh
+from virl_quad.deploy.operator import Operator, wait_until
 
-from virl_quad.deploy import protocol as P
-from virl_quad.deploy.protocol import MsgType, ProtocolError
-from virl_quad.deploy.zenoh_config import load_config, publisher_options
+#: An operator / monitor session (kept under this name for the tests).
+Monitor = Operator
 
 ROOT: Path = Path(__file__).resolve().parents[2]
 TRAINED_POLICY: Path = ROOT / "policies" / "pupper_trot.pt"
-
-
-def wait_until(pred: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
-    """Poll ``pred`` until it returns something truthy or ``timeout`` s pass; returns its last value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = pred()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
 
 
 def port_open(port: int, host: str = "127.0.0.1") -> bool:
@@ -130,82 +116,3 @@ def export_untrained(folder: Path | str, robot: str, seed: int = 0) -> Path:
     if not out.is_file():
         export_actor(fresh_actor(seed=seed), robot, out, demo={"source": "trot", "num_frames": 40})
     return out
-
-
-class Monitor:
-    """An operator / monitor Zenoh session on one robot: newest STATUS and STATE, ARM, E-stop."""
-
-    def __init__(self, conf: zenoh.Config, robot_id: str) -> None:
-        self.robot_id = robot_id
-        self.session = zenoh.open(conf)
-        self.status: dict[str, Any] = {}
-        self.state: P.RobotState | None = None
-        self.statuses = 0
-        self._lock = threading.Lock()
-        self._seq = P.SeqCounter()
-        self._subs = [self.session.declare_subscriber(P.key(robot_id, "status"), self._on_status),
-                      self.session.declare_subscriber(P.key(robot_id, "state"), self._on_state)]
-
-    @classmethod
-    def peer(cls, endpoint: str, robot_id: str) -> "Monitor":
-        """A monitor on the plain peer config connecting to ``endpoint``."""
-        return cls(load_config("peer", listen=[], connect=[endpoint]), robot_id)
-
-    def _on_status(self, sample: zenoh.Sample) -> None:
-        try:
-            body = P.decode(sample.payload.to_bytes(), expect=MsgType.STATUS).body
-        except ProtocolError:
-            return
-        with self._lock:
-            self.status = body  # type: ignore[assignment]
-            self.statuses += 1
-
-    def _on_state(self, sample: zenoh.Sample) -> None:
-        try:
-            st = P.decode(sample.payload.to_bytes(), expect=MsgType.STATE).body
-        except ProtocolError:
-            return
-        with self._lock:
-            self.state = st  # type: ignore[assignment]
-
-    def latest(self) -> dict[str, Any]:
-        """A copy of the newest STATUS body ({} before the first)."""
-        with self._lock:
-            return dict(self.status)
-
-    def wait_status(self, pred: Callable[[dict[str, Any]], bool], timeout: float = 60.0) -> dict[str, Any]:
-        """Wait for a STATUS satisfying ``pred``; returns it, or the last one seen (pred false)."""
-        got = wait_until(lambda: (lambda s: s if s and pred(s) else None)(self.latest()), timeout)
-        return got or self.latest()
-
-    def fresh_status(self, timeout: float = 30.0) -> dict[str, Any]:
-        """A STATUS published after this call (waits for the next one)."""
-        n = self.statuses
-        wait_until(lambda: self.statuses > n + 1, timeout)
-        return self.latest()
-
-    def alive(self, role: str, timeout: float = 2.0) -> bool:
-        """True if the ``alive/<role>`` liveliness token of this robot is present."""
-        replies = self.session.liveliness().get(P.liveliness_key(self.robot_id, role), timeout=timeout)
-        return any(r.ok is not None for r in replies)
-
-    def arm(self, robot_id: str | None = None) -> None:
-        """Publish an ARM for ``robot_id`` (default this monitor's robot)."""
-        body = {"robot_id": robot_id or self.robot_id}
-        self.session.put(P.key(self.robot_id, "arm"), P.encode_json(MsgType.ARM, body, self._seq()),
-                         **publisher_options("arm"))
-
-    def estop(self, reason: str = "test") -> None:
-        """Publish an E-stop."""
-        self.session.put(P.key(self.robot_id, "estop"),
-                         P.encode_json(MsgType.ESTOP, {"reason": reason, "source": "monitor"}, self._seq()),
-                         **publisher_options("estop"))
-
-    def close(self) -> None:
-        """Undeclare and close the session."""
-        for s in self._subs:
-            try:
-                s.undeclare()
-            except Exception:
-                pass
-        self.session.close()

@@ -19,6 +19,7 @@ commanding and waits for it to come back (then checks its ANNOUNCE again).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 import time
@@ -70,6 +71,7 @@ class PolicyRunner:
         self.counts: Counter[str] = Counter()   # served, skipped reasons
         self._lock = threading.Lock()
         self._seq = P.SeqCounter()
+        self._tau_ff = np.zeros(P.NUM_JOINTS)                     # N·m, no feed-forward
         self.reset()
 
     def reset(self) -> None:
@@ -97,23 +99,26 @@ class PolicyRunner:
         with self._lock:
             if msg.seq <= self.last_state_seq:
                 return self._skip("stale_state")
-            quat = np.asarray(st.quat, dtype=np.float64)
-            fields = (st.q, st.dq, st.gyro, quat)
-            if not all(np.all(np.isfinite(f)) for f in fields):
+            quat = st.quat
+            norm2 = float(quat @ quat)
+            if not math.isfinite(norm2):
                 return self._skip("non_finite_state")
-            if not 0.9 < float(np.linalg.norm(quat)) < 1.1:
+            if not 0.81 < norm2 < 1.21:                          # |quat| outside [0.9, 1.1]
                 return self._skip("bad_quaternion")
+            try:                                                # raises on NaN/inf in gyro, q, dq
+                obs = policy_observation(self.spec, quat / math.sqrt(norm2), st.gyro, st.q, st.dq,
+                                         self.last_action, self.phase())
+            except ValueError:
+                return self._skip("non_finite_state")
             self.last_state_seq = msg.seq
             try:
-                obs = policy_observation(self.spec, quat / np.linalg.norm(quat), st.gyro, st.q, st.dq,
-                                         self.last_action, self.phase())
                 action = self.policy.act(obs)
-            except ValueError:                                  # NaN/inf observation or action
+            except ValueError:                                  # the policy produced NaN/inf
                 return self._skip("policy_non_finite")
             q_target = self.policy.joint_targets(action)        # rad, within the joint limits
             self.last_action = np.clip(action, -self.action_clip, self.action_clip)
             self.k += 1
-            cmd = JointCommand(q_target, self.kp, self.kd, np.zeros(P.NUM_JOINTS), ref_seq=msg.seq)
+            cmd = JointCommand(q_target, self.kp, self.kd, self._tau_ff, ref_seq=msg.seq)
             out = P.encode_command(cmd, self._seq())
         self.counts["served"] += 1
         return out, ""
@@ -230,9 +235,30 @@ def load(path: str) -> Any:
     if not Path(path).is_file():
         raise UserError(f"policy file {path} does not exist (train and export one, or pass --policy)")
     try:
-        return load_policy(path)
+        policy = load_policy(path)
     except (KeyError, TypeError, AttributeError) as e:   # metadata with missing or mistyped members
         raise UserError(f"policy metadata of {path} is incomplete ({type(e).__name__}: {e})") from None
+    return speed_up(policy)
+
+
+def speed_up(policy: Any, warmup: int = 20) -> Any:
+    """Freeze the TorchScript module (weights inlined: about 3x faster per call for small MLPs)
+    if the frozen module gives the same actions, then warm it up so that the first state is
+    not slowed down by TorchScript's profiling runs."""
+    import torch
+
+    probe = np.random.default_rng(0).normal(size=policy.meta["observation"]["size"]).astype(np.float32)
+    want = policy.act(probe)
+    original = policy.module
+    try:
+        policy.module = torch.jit.freeze(original.eval())
+        if not np.allclose(policy.act(probe), want, rtol=1e-5, atol=1e-6):
+            policy.module = original
+    except Exception:   # freezing is an optimisation only: keep the module as exported
+        policy.module = original
+    for _ in range(warmup):
+        policy.act(probe)
+    return policy
 
 
 def main(config: ServeConfig) -> int:

@@ -47,7 +47,8 @@ class RewardConfig:
     conv2_stride: int = 2
     dense_units: int = 256            # paper: dense 256
     frame_latent: int = 64            # paper: dense 64 (sigmoid) = e_t
-    dropout: float = 0.1              # probability, between the conv layers (project choice)
+    dropout: float = 0.1              # probability of dropping a whole conv1 feature map
+                                      # (Dropout2d, between the conv layers; project choice)
 
     # -- sequence encoder omega / decoder rho (paper sizes) --------------------------------
     lstm_units: int = 128             # paper: LSTM 128 units

@@ -1,7 +1,7 @@
 """Off-policy store of agent episodes: agent frames with their matching expert frames, as uint8.
 
 Memory is bounded in bytes (frame payload: agent + expert images, including
-the per-env pieces of episodes still open in :meth:`EpisodeStore.add_rollout`);
+the per-env buffers of episodes still open in :meth:`EpisodeStore.add_rollout`);
 the oldest finished episodes are evicted first.
 """
 
@@ -24,7 +24,7 @@ class EpisodeStore:
         self.max_episode_frames = int(max_episode_frames)
         self._episodes: deque[tuple[np.ndarray, np.ndarray]] = deque()
         self._stored_bytes = 0
-        self._open: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}  # env -> pieces of an open episode
+        self._open: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}  # env -> (agent, expert buffers, used)
         self._open_bytes = 0
         self.episodes_added = 0
         self.episodes_evicted = 0
@@ -42,11 +42,11 @@ class EpisodeStore:
     def add_rollout(self, agent, expert, dones) -> int:
         """Add a rollout [T, N, 48, 48] of N envs; ``dones`` [T, N]: frame t is the last of its episode.
 
-        Frames of an episode that is still running at the end of the rollout
-        are kept and joined with the next rollout's frames of the same env
-        (the env count must stay the same). Pieces longer than
-        ``max_episode_frames`` are stored as separate episodes. Returns the
-        number of episodes stored by this call.
+        Frames of an episode still running at the end of the rollout stay in a
+        per-env open buffer, joined with the next rollout's frames of the same env
+        (the env count must stay the same); open episodes can already be sampled
+        (:meth:`sequences`). Pieces reaching ``max_episode_frames`` are stored as
+        separate episodes. Returns the number of episodes finished by this call.
         """
         a = to_uint8(agent, "agent_frames", "TN")
         e = to_uint8(expert, "expert_frames", "TN")
@@ -61,35 +61,50 @@ class EpisodeStore:
             start = 0
             for t in np.flatnonzero(d[:, n]).tolist() + [None]:
                 stop = T if t is None else t + 1
-                if stop > start:
-                    self._append_open(n, a[start:stop, n], e[start:stop, n])
+                for s in range(start, stop, self.max_episode_frames):
+                    self._append_open(n, a[s:min(stop, s + self.max_episode_frames), n],
+                                      e[s:min(stop, s + self.max_episode_frames), n])
                 if t is not None:
                     self._close(n)
                 start = stop
+        self._evict()
         return self.episodes_added - before
 
     def flush(self) -> None:
-        """Store the open episode pieces of every env as finished episodes."""
+        """Store the open episodes of every env as finished episodes."""
         for n in list(self._open):
             self._close(n)
 
     def _append_open(self, n: int, a: np.ndarray, e: np.ndarray) -> None:
-        pieces = self._open.setdefault(n, [])
-        pieces.append((a.copy(), e.copy()))
-        self._open_bytes += a.nbytes + e.nbytes
-        if sum(p[0].shape[0] for p in pieces) >= self.max_episode_frames:
+        """Append frames to env n's open buffer (amortised growth, capped at max_episode_frames)."""
+        k = a.shape[0]
+        buf_a, buf_e, used = self._open.get(n, (None, None, 0))
+        if used + k > self.max_episode_frames:
             self._close(n)
-        self._evict()
+            buf_a, buf_e, used = None, None, 0
+        cap = 0 if buf_a is None else buf_a.shape[0]
+        if used + k > cap:
+            new_cap = min(self.max_episode_frames, max(2 * cap, used + k, 32))
+            grown_a = np.empty((new_cap, FRAME, FRAME), np.uint8)
+            grown_e = np.empty((new_cap, FRAME, FRAME), np.uint8)
+            if used:
+                grown_a[:used], grown_e[:used] = buf_a[:used], buf_e[:used]
+            self._open_bytes += (new_cap - cap) * 2 * FRAME * FRAME
+            buf_a, buf_e = grown_a, grown_e
+        buf_a[used:used + k], buf_e[used:used + k] = a, e
+        self._open[n] = (buf_a, buf_e, used + k)
+        if used + k >= self.max_episode_frames:
+            self._close(n)
 
     def _close(self, n: int) -> None:
-        pieces = self._open.pop(n, [])
-        if not pieces:
+        if n not in self._open:
             return
-        a = np.concatenate([p[0] for p in pieces])
-        e = np.concatenate([p[1] for p in pieces])
-        self._open_bytes -= sum(p[0].nbytes + p[1].nbytes for p in pieces)
-        for s in range(0, a.shape[0], self.max_episode_frames):
-            self._push(a[s:s + self.max_episode_frames], e[s:s + self.max_episode_frames])
+        buf_a, buf_e, used = self._open.pop(n)
+        self._open_bytes -= buf_a.nbytes + buf_e.nbytes
+        if used == buf_a.shape[0]:
+            self._push(buf_a, buf_e)
+        elif used:
+            self._push(buf_a[:used].copy(), buf_e[:used].copy())
 
     def _push(self, a: np.ndarray, e: np.ndarray) -> None:
         a, e = np.ascontiguousarray(a), np.ascontiguousarray(e)
@@ -102,8 +117,8 @@ class EpisodeStore:
 
     def _evict(self) -> None:
         while self._stored_bytes + self._open_bytes > self.max_bytes:
-            if not self._episodes:  # open pieces alone are over budget: finish the longest one
-                self._close(max(self._open, key=lambda n: sum(p[0].shape[0] for p in self._open[n])))
+            if not self._episodes:  # open buffers alone are over budget: finish the longest one
+                self._close(max(self._open, key=lambda n: self._open[n][2]))
                 continue
             a, e = self._episodes.popleft()
             self._stored_bytes -= a.nbytes + e.nbytes
@@ -115,31 +130,39 @@ class EpisodeStore:
         return len(self._episodes)
 
     def episode(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """The i-th stored episode (0 = oldest) as (agent, expert) uint8 [T, 48, 48] views."""
+        """The i-th finished episode (0 = oldest) as (agent, expert) uint8 [T, 48, 48] arrays."""
         return self._episodes[i]
 
     def lengths(self) -> np.ndarray:
-        """Frame counts of the stored episodes, oldest first."""
+        """Frame counts of the finished episodes, oldest first."""
         return np.array([a.shape[0] for a, _ in self._episodes], dtype=np.int64)
+
+    def sequences(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """What a batch may sample: the finished episodes (oldest first), then the open ones so far (views)."""
+        return list(self._episodes) + [(a[:u], e[:u]) for a, e, u in self._open.values() if u]
 
     @property
     def num_frames(self) -> int:
-        """Stored (agent, expert) frame pairs, open pieces included."""
-        stored = sum(a.shape[0] for a, _ in self._episodes)
-        return stored + sum(p[0].shape[0] for ps in self._open.values() for p in ps)
+        """Stored (agent, expert) frame pairs, open episodes included."""
+        return sum(a.shape[0] for a, _ in self._episodes) + sum(u for _, _, u in self._open.values())
 
     @property
     def nbytes(self) -> int:
-        """Bytes of frame payload held (stored + open), at most ``max_bytes`` after any add."""
+        """Bytes of frame payload held (finished + open buffers' capacity), at most ``max_bytes`` after any add."""
         return self._stored_bytes + self._open_bytes
 
     @property
     def bytes_per_frame(self) -> float:
-        """Payload bytes per stored time step (agent + expert image: 2 * 48 * 48 = 4608 B)."""
+        """Payload bytes per stored time step (agent + expert image: 2 * 48 * 48 = 4608 B; more while
+        open buffers have spare capacity)."""
         n = self.num_frames
         return self.nbytes / n if n else float(2 * FRAME * FRAME)
 
     @property
     def mean_episode_length(self) -> float:
-        """Mean frame count of the stored episodes (nan when empty): EESP scales windows with it."""
-        return float(self.lengths().mean()) if self._episodes else float("nan")
+        """Mean frame count of the finished episodes (of the open ones while none has finished; nan when
+        empty): EESP scales its windows with it."""
+        if self._episodes:
+            return float(self.lengths().mean())
+        open_lengths = [u for _, _, u in self._open.values() if u]
+        return float(np.mean(open_lengths)) if open_lengths else float("nan")

@@ -63,7 +63,8 @@ class GaifoReward(RewardModel):
         return self.demo[i], self.demo[j]
 
     def _agent_pairs(self, rng: np.random.Generator, k: int) -> tuple[np.ndarray, np.ndarray]:
-        lengths = self.dataset.lengths()
+        seqs = self.dataset.sequences()
+        lengths = np.array([a.shape[0] for a, _ in seqs], dtype=np.int64)
         eligible = np.flatnonzero(lengths >= 2)
         if eligible.size == 0:
             raise ValueError("gaifo needs stored agent episodes of >= 2 frames before update()")
@@ -71,7 +72,7 @@ class GaifoReward(RewardModel):
         eps = rng.choice(eligible, size=k, p=w / w.sum())  # uniform over stored transitions
         prev, cur = [], []
         for e in eps.tolist():
-            agent, _ = self.dataset.episode(e)
+            agent, _ = seqs[e]
             t = int(rng.integers(1, agent.shape[0]))
             prev.append(agent[t - 1])
             cur.append(agent[t])

@@ -119,7 +119,12 @@ class RewardModel:
         return self.dataset.add_rollout(agent_frames, expert_frames, dones)
 
     def update(self, num_updates: int) -> dict[str, float]:
-        """Run ``num_updates`` batch updates of the distance model; return mean losses for logging."""
+        """Run ``num_updates`` batch updates of the distance model; return means over them for logging.
+
+        Keys: the loss parts of the variant (``sns``, ``sni``, ``raes``, ``vaei``; ``disc``,
+        ``d_expert``, ``d_agent`` for gaifo), ``total``, ``grad_norm`` (before clipping) and,
+        for the VIRL variants, ``window`` (frames per training sequence). Empty for 0 updates.
+        """
         return self.trainer.update(num_updates)
 
     # -- rewards -----------------------------------------------------------------------------

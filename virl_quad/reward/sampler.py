@@ -35,6 +35,7 @@ class PairSampler:
     def __init__(self, cfg: RewardConfig, demo: np.ndarray, clips: list[np.ndarray],
                  dataset: EpisodeStore) -> None:
         self.cfg, self.demo, self.clips, self.dataset = cfg, demo, list(clips), dataset
+        self._seqs: list[tuple[np.ndarray, np.ndarray]] = []
         off = cfg.same_source_max_offset
         shortest = min(c.shape[0] for c in [demo] + self.clips)
         if not cfg.clips_cyclic and shortest < cfg.window_min + 1 + 2 * off:
@@ -55,7 +56,7 @@ class PairSampler:
     def _agent_window(self, rng: np.random.Generator, eligible: np.ndarray, need: int
                       ) -> tuple[np.ndarray, np.ndarray, int]:
         """(agent uint8 episode, expert uint8 episode, EESP start) for a window of ``need`` frames."""
-        agent, expert = self.dataset.episode(int(rng.choice(eligible)))
+        agent, expert = self._seqs[int(rng.choice(eligible))]
         return agent, expert, augment.eesp_start(rng, agent.shape[0], need)
 
     def _anchor(self, rng: np.random.Generator, eligible: np.ndarray, need: int) -> np.ndarray:
@@ -123,7 +124,8 @@ class PairSampler:
         """Draw a batch: ``batch_pairs`` pairs (default cfg.batch_pairs), the first half positive."""
         B = batch_pairs or self.cfg.batch_pairs
         L = self.window_length(rng)
-        lengths = self.dataset.lengths()
+        self._seqs = self.dataset.sequences()       # finished and open agent episodes
+        lengths = np.array([a.shape[0] for a, _ in self._seqs], dtype=np.int64)
         eligible = np.flatnonzero(lengths >= L + 1)
         pos, neg = self.available(L, eligible.size > 0)
         kinds = [self._pick(rng, pos) for _ in range(B // 2)] + [self._pick(rng, neg) for _ in range(B - B // 2)]

@@ -3,7 +3,8 @@
 The trainer owns its randomness: a numpy Generator for batch drawing and a
 private torch CPU RNG state for dropout and VAE sampling, swapped in only
 while :meth:`Trainer.update` runs. A seeded run therefore gives the same
-losses and weights whatever the caller does with the global RNGs.
+losses and weights whatever the caller does with the global RNGs (on CPU; on
+a GPU, dropout draws from the device RNG, which is not isolated).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ class TrainArgs:
     eval_seconds: float = 10.0         # s, length of an evaluation episode
     episode_seconds: float = 10.0      # s, training episode time limit
     randomize: bool = True             # domain randomisation during training
-    reward_updates: int = 4            # distance-model batch updates per iteration (M in Algorithm 1)
+    reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
     reward_lr: float = 1e-4            # distance-model Adam learning rate (slow: a fast model saturates the reward)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus

@@ -92,6 +92,16 @@ class SimBackend(Backend):
 
     # ------------------------------------------------------------------ simulation extras
 
+    def reset(self) -> None:
+        """Put the robot back on its feet (default pose, spawn height, at rest), as an operator
+        would before re-arming; the simulation clock keeps running."""
+        if self.closed:
+            raise BackendError("sim backend is closed")
+        t = self.world.time
+        self.world.reset()
+        self.world.time = t
+        self._accel_world = np.zeros(3)
+
     @property
     def sim_time(self) -> float:
         """Simulated time since reset, s."""

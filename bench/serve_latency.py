@@ -1,0 +1,196 @@
+"""Policy-server latency, measured in one run (run by hand: ``python bench/serve_latency.py``).
+
+This process plays the HAL on loopback Zenoh (peer config, scouting off): it publishes a
+STATE (464 B) and times until the COMMAND (424 B) answering it (``ref_seq``) arrives, with
+the real ``python -m virl_quad.deploy.serve`` in another process. Beside it, the same
+measurement against a raw Zenoh echo process (same payload sizes, same QoS, a Python
+callback that only copies the sequence number into a fixed reply) gives the transport's
+own round trip. Both run back-to-back (next state as soon as the answer arrives) and
+paced at 100 Hz.
+
+Goals: p99 <= 1 ms at 100 Hz through the server; server median <= 1.5 x the raw median.
+Figures depend on what else the machine is doing: the load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import struct
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from virl_quad import robots  # noqa: E402
+from virl_quad.deploy import protocol as P  # noqa: E402
+from virl_quad.deploy.harness import Proc, policy_for_tests, wait_until  # noqa: E402
+from virl_quad.deploy.protocol import MsgType  # noqa: E402
+from virl_quad.deploy.zenoh_config import free_port, load_config, publisher_options  # noqa: E402
+
+ROBOT_ID = "bench-01"
+_U64 = struct.Struct("<Q")
+
+
+def echo(endpoint: str) -> None:
+    """Raw ping-pong peer: answer each STATE-sized sample with a COMMAND-sized one carrying
+    the sample's seq at the ref_seq offset. Runs until SIGINT / SIGTERM."""
+    from virl_quad.deploy._zenoh_io import StopFlag
+
+    conf = load_config("peer", listen=[], connect=[endpoint])
+    reply = bytearray(P.encode_command(P.JointCommand(*(np.zeros(12) for _ in range(4))), 1))
+    with zenoh.open(conf) as s:
+        pub = s.declare_publisher(P.key(ROBOT_ID, "cmd"), **publisher_options("cmd"))
+
+        def on_state(sample: zenoh.Sample) -> None:
+            data = sample.payload.to_bytes()
+            out = bytearray(reply)
+            out[P.HEADER_SIZE:P.HEADER_SIZE + 8] = data[8:16]          # ref_seq = the state's seq
+            pub.put(bytes(out))
+
+        sub = s.declare_subscriber(P.key(ROBOT_ID, "state"), on_state)
+        token = s.liveliness().declare_token(P.liveliness_key(ROBOT_ID, "policy"))
+        with StopFlag() as stop:
+            while not stop.wait(0.2):
+                pass
+        token.undeclare()
+        sub.undeclare()
+        pub.undeclare()
+
+
+class FakeHal:
+    """The HAL side: announce, liveliness, state out, command in (timed in the callback)."""
+
+    def __init__(self, session: zenoh.Session, spec) -> None:
+        self.session = session
+        self.announce = P.encode_json(MsgType.ANNOUNCE, P.announce_body(spec, ROBOT_ID), 1)
+        self.state = P.RobotState.zeros(spec.default_pose)
+        self.pub = session.declare_publisher(P.key(ROBOT_ID, "state"), **publisher_options("state"))
+        self._waiting = -1
+        self._t_recv = 0
+        self._got = threading.Event()
+        self._seq = P.SeqCounter()
+        self.entities = [
+            self.pub,
+            session.declare_queryable(P.key(ROBOT_ID, "announce"), lambda q: q.reply(q.key_expr, self.announce)),
+            session.declare_subscriber(P.key(ROBOT_ID, "cmd"), self._on_cmd),
+            session.liveliness().declare_token(P.liveliness_key(ROBOT_ID, "hal")),
+        ]
+
+    def _on_cmd(self, sample: zenoh.Sample) -> None:
+        t = time.perf_counter_ns()
+        (ref,) = _U64.unpack_from(sample.payload.to_bytes(), P.HEADER_SIZE)
+        if ref == self._waiting:
+            self._t_recv = t
+            self._got.set()
+
+    def round_trip(self) -> float | None:
+        """One state -> command round trip in µs (None if no answer within 1 s)."""
+        seq = self._seq()
+        msg = P.encode_state(self.state, seq)
+        assert len(msg) == 464
+        self._got.clear()
+        self._waiting = seq
+        t0 = time.perf_counter_ns()
+        self.pub.put(msg)
+        if not self._got.wait(1.0):
+            return None
+        return (self._t_recv - t0) / 1e3
+
+    def series(self, n: int, rate_hz: float | None) -> tuple[np.ndarray, int]:
+        """n round trips back-to-back (rate None) or at ``rate_hz``; (µs array, lost count)."""
+        out, lost = [], 0
+        period = 1.0 / rate_hz if rate_hz else 0.0
+        t_next = time.perf_counter()
+        gc.disable()
+        try:
+            for _ in range(n):
+                if period:
+                    t_next += period
+                    delay = t_next - time.perf_counter()
+                    if delay > 0:
+                        time.sleep(delay)
+                rtt = self.round_trip()
+                if rtt is None:
+                    lost += 1
+                else:
+                    out.append(rtt)
+        finally:
+            gc.enable()
+        return np.array(out), lost
+
+
+def stats(a: np.ndarray) -> dict[str, float]:
+    """median, p99, max (µs)."""
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+def run_peer(hal: FakeHal, proc: Proc, n: int, paced: int, label: str) -> dict[str, tuple[dict, int]]:
+    """Wait for the peer's liveliness, warm up, measure both series, stop the peer."""
+    ok = wait_until(lambda: any(r.ok is not None for r in hal.session.liveliness().get(
+        P.liveliness_key(ROBOT_ID, "policy"), timeout=1.0)) or not proc.alive(), 60.0, 0.2)
+    if not ok or not proc.alive():
+        raise SystemExit(f"{label} did not come up:\n{proc.output()}")
+    hal.series(300, None)                                   # warm-up (JIT-free, but caches, sockets)
+    res = {}
+    for name, count, rate in (("back-to-back", n, None), ("100 Hz", paced, 100.0)):
+        a, lost = hal.series(count, rate)
+        res[name] = (stats(a), lost)
+    proc.stop()
+    proc.close()
+    return res
+
+
+def main() -> None:
+    """Run both measurements and print the table."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--policy", help="policy .pt (default policies/pupper_trot.pt, else an untrained export)")
+    p.add_argument("--n", type=int, default=3000, help="back-to-back round trips per peer")
+    p.add_argument("--paced", type=int, default=1000, help="round trips at 100 Hz per peer")
+    p.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.echo:
+        echo(args.echo)
+        return
+    zenoh.init_log_from_env_or("error")
+    spec = robots.get("pupper")
+    tmp = tempfile.mkdtemp(prefix="virl_bench_")
+    policy, trained = (Path(args.policy), True) if args.policy else policy_for_tests(tmp)
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    load0 = os.getloadavg()
+    print(f"policy {policy} ({'trained' if trained else 'untrained export'}), {os.cpu_count()} CPUs, "
+          f"load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
+    with zenoh.open(load_config("peer", listen=[ep])) as session:
+        hal = FakeHal(session, spec)
+        server = Proc("virl_quad.deploy.serve", ["--policy", str(policy), "--robot-id", ROBOT_ID,
+                                                  "--connect", ep, "--quiet"], "serve")
+        res_srv = run_peer(hal, server, args.n, args.paced, "the policy server")
+        raw = Proc("bench.serve_latency", ["--echo", ep], "echo")
+        res_raw = run_peer(hal, raw, args.n, args.paced, "the raw echo")
+        for e in reversed(hal.entities):
+            e.undeclare()
+        session.close()
+    load1 = os.getloadavg()
+    print(f"{'round trip, µs':<34}{'median':>9}{'p99':>9}{'max':>9}{'lost':>6}")
+    for mode in ("back-to-back", "100 Hz"):
+        for label, res in (("policy server", res_srv), ("raw Zenoh echo", res_raw)):
+            s, lost = res[mode]
+            print(f"{label + ' (' + mode + ')':<34}{s['median']:9.0f}{s['p99']:9.0f}{s['max']:9.0f}{lost:6d}")
+    for mode in ("back-to-back", "100 Hz"):
+        r = res_srv[mode][0]["median"] / res_raw[mode][0]["median"]
+        print(f"median ratio server / raw ({mode}): {r:.2f}  (goal <= 1.5)")
+    p99 = res_srv["100 Hz"][0]["p99"]
+    print(f"server p99 at 100 Hz: {p99 / 1e3:.3f} ms  (goal <= 1 ms: {'met' if p99 <= 1000 else 'NOT met'})")
+    print(f"load average after: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

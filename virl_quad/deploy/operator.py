@@ -1,0 +1,182 @@
+"""Operator console: watch a HAL's STATUS, re-arm it, E-stop it.
+
+    python -m virl_quad.deploy.operator status --robot-id pupper-01 [--watch]
+    python -m virl_quad.deploy.operator arm    --robot-id pupper-01
+    python -m virl_quad.deploy.operator estop  --robot-id pupper-01 --reason "hand on the robot"
+
+Connects like the policy server (``--zenoh``, ``--connect``; default the config's endpoints,
+else ``tcp/127.0.0.1:7447``). Under ``secure_client.json5`` the session's user decides what
+the HAL accepts: ``operator`` may arm, every authenticated user may E-stop. ``arm`` and
+``estop`` wait for a STATUS that shows the effect and exit 1 if none comes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import zenoh
+
+from virl_quad.cli import UserError, run_main
+from virl_quad.deploy import protocol as P
+from virl_quad.deploy._zenoh_io import StopFlag, open_config, open_session
+from virl_quad.deploy.protocol import MsgType, ProtocolError
+from virl_quad.deploy.zenoh_config import load_config, publisher_options
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def wait_until(pred: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
+    """Poll ``pred`` until it returns something truthy or ``timeout`` s pass; returns its last value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = pred()
+        if value or time.monotonic() > deadline:
+            return value
+        time.sleep(interval)
+
+
+class Operator:
+    """A Zenoh session on one robot: newest STATUS and STATE, ARM, E-stop."""
+
+    def __init__(self, conf: zenoh.Config, robot_id: str, session: zenoh.Session | None = None) -> None:
+        """Open a session with ``conf`` (or use ``session``) and subscribe to STATUS and STATE."""
+        self.robot_id = P.check_robot_id(robot_id)
+        self.session = session if session is not None else zenoh.open(conf)
+        self.status: dict[str, Any] = {}
+        self.state: P.RobotState | None = None
+        self.statuses = 0                      # STATUS messages received
+        self._lock = threading.Lock()
+        self._seq = P.SeqCounter()
+        self._subs = [self.session.declare_subscriber(P.key(robot_id, "status"), self._on_status),
+                      self.session.declare_subscriber(P.key(robot_id, "state"), self._on_state)]
+
+    @classmethod
+    def peer(cls, endpoint: str, robot_id: str) -> "Operator":
+        """An operator on the plain peer config connecting to ``endpoint``."""
+        return cls(load_config("peer", listen=[], connect=[endpoint]), robot_id)
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        try:
+            body = P.decode(sample.payload.to_bytes(), expect=MsgType.STATUS).body
+        except ProtocolError:
+            return
+        with self._lock:
+            self.status = body  # type: ignore[assignment]
+            self.statuses += 1
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        try:
+            st = P.decode(sample.payload.to_bytes(), expect=MsgType.STATE).body
+        except ProtocolError:
+            return
+        with self._lock:
+            self.state = st  # type: ignore[assignment]
+
+    def latest(self) -> dict[str, Any]:
+        """A copy of the newest STATUS body ({} before the first)."""
+        with self._lock:
+            return dict(self.status)
+
+    def wait_status(self, pred: Callable[[dict[str, Any]], bool], timeout: float = 60.0) -> dict[str, Any]:
+        """Wait up to ``timeout`` s for a STATUS satisfying ``pred``; returns it, or the last
+        one seen (for which ``pred`` is false)."""
+        got = wait_until(lambda: (lambda s: s if s and pred(s) else None)(self.latest()), timeout)
+        return got or self.latest()
+
+    def alive(self, role: str, timeout: float = 2.0) -> bool:
+        """True if the ``alive/<role>`` liveliness token of this robot is visible."""
+        replies = self.session.liveliness().get(P.liveliness_key(self.robot_id, role), timeout=timeout)
+        return any(r.ok is not None for r in replies)
+
+    def arm(self, robot_id: str | None = None) -> None:
+        """Publish an ARM for ``robot_id`` (default this operator's robot)."""
+        body = {"robot_id": robot_id or self.robot_id}
+        self.session.put(P.key(self.robot_id, "arm"), P.encode_json(MsgType.ARM, body, self._seq()),
+                         **publisher_options("arm"))
+
+    def estop(self, reason: str = "operator") -> None:
+        """Publish an E-stop with ``reason``."""
+        self.session.put(P.key(self.robot_id, "estop"),
+                         P.encode_json(MsgType.ESTOP, {"reason": reason, "source": "operator"}, self._seq()),
+                         **publisher_options("estop"))
+
+    def close(self) -> None:
+        """Undeclare the subscribers and close the session."""
+        for s in self._subs:
+            try:
+                s.undeclare()
+            except Exception:
+                pass
+        self.session.close()
+
+
+@dataclass
+class OperatorConfig:
+    """One operator command."""
+
+    action: str                          # status | arm | estop
+    robot_id: str = "pupper-01"          # the HAL's robot id
+    zenoh: str = "peer"                  # Zenoh config name or .json5 path
+    connect: list[str] | None = None     # endpoints; default the config's, else DEFAULT_CONNECT
+    reason: str = "operator"             # estop: reason shown in STATUS fault
+    wait: float = 10.0                   # s to wait for the HAL and for the effect
+    watch: bool = False                  # status: keep printing until Ctrl-C
+
+
+def main(config: OperatorConfig) -> int:
+    """Run one operator command; 0 if the HAL confirmed it in STATUS, 1 if not."""
+    if config.action not in ("status", "arm", "estop"):
+        raise UserError(f"unknown action {config.action!r}; choose status, arm or estop")
+    conf = open_config(config.zenoh, listen=[], connect=config.connect)
+    if not config.connect and conf.get_json("connect/endpoints").strip() in ("[]", "null"):
+        conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
+    zenoh.init_log_from_env_or("error")
+    with open_session(conf) as session:
+        op = Operator(conf, config.robot_id, session=session)
+        try:
+            before = op.wait_status(lambda s: True, config.wait)
+            if not before:
+                print(f"no STATUS from HAL {config.robot_id!r} within {config.wait:g} s", file=sys.stderr)
+                return 1
+            if config.action == "arm":
+                op.arm()
+                n = before.get("events", {}).get("arm", 0)
+                st = op.wait_status(lambda s: s.get("events", {}).get("arm", 0) > n, config.wait)
+                ok = st.get("events", {}).get("arm", 0) > n
+            elif config.action == "estop":
+                op.estop(config.reason)
+                st = op.wait_status(lambda s: s.get("mode") == "DAMPING", config.wait)
+                ok = st.get("mode") == "DAMPING"
+            else:
+                st, ok = before, True
+            print(json.dumps(st, sort_keys=True))
+            with StopFlag() as stop:
+                while config.watch and not stop.wait(1.0):
+                    print(json.dumps(op.latest(), sort_keys=True), flush=True)
+            return 0 if ok else 1
+        finally:
+            op.close()
+
+
+def config_from_args(argv: list[str] | None = None) -> OperatorConfig:
+    """Parse the command line into an :class:`OperatorConfig`."""
+    p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.operator", description=__doc__.split("\n\n")[0])
+    p.add_argument("action", choices=["status", "arm", "estop"])
+    p.add_argument("--robot-id", default="pupper-01", help="the HAL's robot id")
+    p.add_argument("--zenoh", default="peer", help="Zenoh config name or .json5 path")
+    p.add_argument("--connect", action="append", help=f"HAL endpoint (default the config's, else {DEFAULT_CONNECT})")
+    p.add_argument("--reason", default="operator", help="estop: reason text")
+    p.add_argument("--wait", type=float, default=10.0, help="s to wait for the HAL and for the effect")
+    p.add_argument("--watch", action="store_true", help="status: keep printing every second")
+    a = p.parse_args(sys.argv[1:] if argv is None else argv)
+    return OperatorConfig(a.action, a.robot_id, a.zenoh, a.connect, a.reason, a.wait, a.watch)
+
+
+if __name__ == "__main__":
+    run_main(lambda: main(config_from_args()))
