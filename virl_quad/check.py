@@ -57,6 +57,7 @@ def format_report(report) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the checks for the chosen robot(s), print the tables; 0 when all pass, 1 otherwise."""
     args = _parser().parse_args(argv)
     if args.robot not in CHOICES:
         _parser().error(f"unknown robot {args.robot!r}; choose one of: {', '.join(CHOICES)}")

@@ -39,10 +39,12 @@ class _Slice:
         self.seeds = [seed + i for i in env_ids]
 
     def reset_all(self) -> dict:
+        """Reset every env with its own seed; stacked observations."""
         obs = [env.reset(seed=s)[0] for env, s in zip(self.envs, self.seeds)]
         return _stack(obs)
 
     def step(self, actions: np.ndarray, time_outs: np.ndarray) -> tuple:
+        """Step every env, resetting those that ended: (obs, final frames, terminated, base x, rewards)."""
         obs, final, terminated = [], [], np.zeros(len(self.envs), bool)
         progress, rewards = np.zeros(len(self.envs)), np.zeros(len(self.envs))
         for i, env in enumerate(self.envs):
@@ -56,6 +58,7 @@ class _Slice:
         return _stack(obs), _stack(final), terminated, progress, rewards
 
     def close(self) -> None:
+        """Release every env."""
         for env in self.envs:
             env.close()
 

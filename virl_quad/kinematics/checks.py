@@ -194,6 +194,7 @@ def check_limits(ctx: Context) -> CheckResult:
 
 
 def check_default_pose(ctx: Context) -> CheckResult:
+    """The spec's default pose lies within the joint limits."""
     v = ctx.kin.limit_violation(ctx.spec.default_pose)
     return CheckResult("default pose within limits", bool(v.max() <= 0.0),
                        f"max violation {v.max():.3g} rad")
