@@ -193,9 +193,10 @@ def test_killed_server_damps_within_3_periods_and_restart_needs_rearm(policy, ri
 
 # ----------------------------------------------------------------------------- (c) E-stop
 
-def test_estop_damps_and_latches_bad_input_is_counted(policy, rig_factory):
+def test_estop_damps_and_latches_bad_input_is_counted(policy, rig_factory, tmp_path):
     path, _ = policy
-    rig = rig_factory("--arm")
+    rec = tmp_path / "estop.npz"
+    rig = rig_factory("--arm", "--record", str(rec))
     rig.server(path)
     st = rig.wait(lambda s: s["mode"] == "ACTIVE" and s["applied"] >= 25, "ACTIVE")
     cmd_key = P.key(ROBOT_ID, "cmd")
@@ -217,6 +218,13 @@ def test_estop_damps_and_latches_bad_input_is_counted(policy, rig_factory):
     assert st["rejected_other"].get("estop:bad_size") == 1 and st["mode"] == "DAMPING", st
     assert rig.hal.alive() and rig.hal.stop(signal.SIGTERM) == 0, rig.logs()
     assert "hal: stopped: mode DAMPING" in rig.hal.output()
+    # what the simulated motors received: from the E-stop on, only damping (kp 0, spec kd)
+    data = np.load(rec)
+    mode = np.array([str(data["modes"][i]) for i in data["mode"]])
+    after = np.arange(int(np.flatnonzero(mode == "DAMPING")[0]), len(mode))
+    assert len(after) >= 50 and np.all(mode[after] == "DAMPING")
+    assert np.all(data["kp"][after] == 0) and np.all(data["tau_ff"][after] == 0)
+    np.testing.assert_array_equal(data["kd"][after], np.broadcast_to(SPEC.kd, (len(after), 12)))
 
 
 def test_real_time_loop_serves_state_and_obeys_the_operator(rig_factory):

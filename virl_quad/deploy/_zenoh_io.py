@@ -31,7 +31,8 @@ def open_config(name: str, listen: Sequence[str] | None = None,
     except FileNotFoundError:
         raise
     except Exception as e:   # zenoh.ZError (json5 syntax, unknown keys) and friends
-        raise UserError(f"bad Zenoh config {name!r}: {_first_line(e)}") from None
+        where = f"Zenoh config {name!r}" + (" or endpoints" if listen or connect else "")
+        raise UserError(f"bad {where}: {_first_line(e)}") from None
 
 
 def open_session(conf: zenoh.Config) -> zenoh.Session:
@@ -43,8 +44,10 @@ def open_session(conf: zenoh.Config) -> zenoh.Session:
 
 
 def _first_line(e: BaseException) -> str:
+    """First line of an error message, without the Rust source locations zenoh appends."""
     text = str(e).strip()
-    return (text.splitlines()[0] if text else type(e).__name__)[:200]
+    line = text.splitlines()[0] if text else type(e).__name__
+    return line.split(" at /")[0][:200]
 
 
 class SeqPublisher:

@@ -205,7 +205,11 @@ class Hal:
             self.log.once(f"read-{type(e).__name__}", f"backend read failed (counted): {e}")
             return None
 
-    def _write(self, cmd: JointCommand) -> None:
+    def _write(self, cmd: JointCommand, state: RobotState | None) -> None:
+        """Apply ``cmd`` (a SafetyController.tick output); the record (``--record``) gets
+        exactly what the backend is given, with the state the tick started from."""
+        if self.recorder is not None:
+            self._guard("record", self.recorder.add, state, self.ctl.mode, cmd, self.ctl.ticks)
         try:
             self.backend.write_command(cmd)
         except Exception as e:
@@ -261,11 +265,9 @@ class Hal:
                 self.unanswered += int(not answered)
             applied_before = self.ctl.applied
             cmd = self.ctl.tick(state)
-            self._write(cmd)
+            self._write(cmd, state)
             if self.ctl.applied > applied_before:
                 self.cmd_tick = self.ctl.ticks
-            if self.recorder is not None:
-                self._guard("record", self.recorder.add, state, self.ctl.mode, cmd, self.ctl.ticks)
             if self.ctl.mode != mode:
                 if self.ctl.mode == Mode.DAMPING:
                     self.fault_tick = self.ctl.ticks

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 import zenoh
 
 from virl_quad.cli import UserError, run_main
@@ -242,11 +243,9 @@ def load(path: str) -> Any:
 
 
 def speed_up(policy: Any, warmup: int = 20) -> Any:
-    """Freeze the TorchScript module (weights inlined: about 3x faster per call for small MLPs)
-    if the frozen module gives the same actions, then warm it up so that the first state is
-    not slowed down by TorchScript's profiling runs."""
-    import torch
-
+    """Freeze the TorchScript module (weights inlined as constants: ``act`` about 20 % faster
+    for the exported MLP, 38 against 47 µs here) if the frozen module gives the same actions,
+    then warm it up so that the first state is not slowed down by TorchScript's profiling runs."""
     probe = np.random.default_rng(0).normal(size=policy.meta["observation"]["size"]).astype(np.float32)
     want = policy.act(probe)
     original = policy.module
@@ -264,8 +263,6 @@ def speed_up(policy: Any, warmup: int = 20) -> Any:
 def main(config: ServeConfig) -> int:
     """Serve ``config.policy`` until SIGINT/SIGTERM; returns the exit code (bad input: UserError,
     ValueError or FileNotFoundError, printed as one line with exit code 2 by run_main)."""
-    import torch
-
     torch.set_num_threads(max(1, config.threads))
     policy = load(config.policy)
     robot_id = P.check_robot_id(config.robot_id or f"{policy.meta['robot']}-01")
