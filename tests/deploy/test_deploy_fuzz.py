@@ -20,19 +20,6 @@ from virl_quad.deploy.protocol import JointCommand, MsgType, ProtocolError, Robo
 from virl_quad.deploy.safety import Mode, SafetyConfig, SafetyController, is_safe_command
 
 
-def standing_state(spec, q=None, quat=(0.0, 0.0, 0.0, 1.0)) -> RobotState:
-    """A level, motionless state at ``q`` (default pose if None)."""
-    st = RobotState.zeros(spec.default_pose if q is None else q)
-    st.quat = np.array(quat, dtype=np.float64)
-    return st
-
-
-def default_command(spec, q=None) -> JointCommand:
-    """A valid command: spec gains, no feed-forward, target ``q`` (default pose if None)."""
-    return JointCommand(np.array(spec.default_pose if q is None else q, dtype=np.float64),
-                        np.array(spec.kp), np.array(spec.kd), np.zeros(12))
-
-
 N_MESSAGES = 10_000
 SEED = 20240606
 
@@ -137,7 +124,7 @@ class Fuzzer:
             else:  # wrong_type
                 kind = r.integers(3)
                 if kind == 0:
-                    data = P.encode_state(standing_state(self.spec), self.next_seq())
+                    data = P.encode_state(RobotState.standing(self.spec), self.next_seq())
                 else:
                     data = P.encode_json(MsgType.STATUS if kind == 1 else MsgType.ARM, {"x": 1}, self.next_seq())
         return data, expect
@@ -160,7 +147,7 @@ def test_fuzz_commands_through_decode_and_safety(robot):
 
     def tick() -> None:
         nonlocal prev_out, prev_mode, outputs, step_checks
-        st = standing_state(spec, prev_out.q_target if prev_out is not None else None)
+        st = RobotState.standing(spec, prev_out.q_target if prev_out is not None else None)
         st.q = st.q + rng.normal(0, 0.01, 12)
         u = rng.random()
         if u < 0.002:
@@ -230,7 +217,7 @@ def test_fuzz_decode_of_every_message_type_raises_only_protocol_error():
     from virl_quad import robots
 
     spec = robots.get("pupper")
-    seeds = [P.encode_state(standing_state(spec), 1), P.encode_command(default_command(spec), 2),
+    seeds = [P.encode_state(RobotState.standing(spec), 1), P.encode_command(JointCommand.hold(spec), 2),
              P.encode_json(MsgType.ANNOUNCE, P.announce_body(spec, "p1"), 3),
              P.encode_json(MsgType.STATUS, {"mode": "IDLE"}, 4), P.encode_json(MsgType.ESTOP, {}, 5),
              P.encode_json(MsgType.ARM, {"robot_id": "p1"}, 6)]

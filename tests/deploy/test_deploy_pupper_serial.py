@@ -28,19 +28,6 @@ from virl_quad.deploy.protocol import JointCommand, RobotState
 from virl_quad.deploy.safety import SafetyController
 
 
-def standing_state(spec, q=None, quat=(0.0, 0.0, 0.0, 1.0)) -> RobotState:
-    """A level, motionless state at ``q`` (default pose if None)."""
-    st = RobotState.zeros(spec.default_pose if q is None else q)
-    st.quat = np.array(quat, dtype=np.float64)
-    return st
-
-
-def default_command(spec, q=None) -> JointCommand:
-    """A valid command: spec gains, no feed-forward, target ``q`` (default pose if None)."""
-    return JointCommand(np.array(spec.default_pose if q is None else q, dtype=np.float64),
-                        np.array(spec.kp), np.array(spec.kd), np.zeros(12))
-
-
 SPEC = robots.get("pupper")
 # a deliberately non-trivial mapping: reversed motor order, mixed signs, offsets
 MAP = MotorMap(order=tuple(reversed(range(12))), sign=(1, -1, 1) * 4, offset=tuple(0.01 * i for i in range(12)))
@@ -181,7 +168,7 @@ def test_write_command_converts_to_board_units():
 
 def test_non_finite_command_is_refused_and_nothing_is_sent():
     with Board() as board, PupperSerialBackend(board.path) as robot:
-        bad = default_command(SPEC)
+        bad = JointCommand.hold(SPEC)
         bad.q_target[3] = np.nan
         with pytest.raises(ValueError):
             robot.write_command(bad)

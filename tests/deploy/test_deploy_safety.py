@@ -12,19 +12,6 @@ from virl_quad.deploy.protocol import JointCommand, MsgType, RobotState
 from virl_quad.deploy.safety import Mode, SafetyConfig, SafetyController, is_safe_command, roll_pitch
 
 
-def standing_state(spec, q=None, quat=(0.0, 0.0, 0.0, 1.0)) -> RobotState:
-    """A level, motionless state at ``q`` (default pose if None)."""
-    st = RobotState.zeros(spec.default_pose if q is None else q)
-    st.quat = np.array(quat, dtype=np.float64)
-    return st
-
-
-def default_command(spec, q=None) -> JointCommand:
-    """A valid command: spec gains, no feed-forward, target ``q`` (default pose if None)."""
-    return JointCommand(np.array(spec.default_pose if q is None else q, dtype=np.float64),
-                        np.array(spec.kp), np.array(spec.kd), np.zeros(12))
-
-
 class Seq:
     """Increasing sequence numbers for a test's sender."""
 
@@ -43,10 +30,10 @@ def ramp_ticks(spec, cfg=SafetyConfig()) -> int:
 def make_active(spec, cfg=SafetyConfig()):
     """A controller driven IDLE -> RAMP -> ACTIVE with valid commands; returns (ctl, seq)."""
     ctl, seq = SafetyController(spec, cfg), Seq()
-    st = standing_state(spec)
+    st = RobotState.standing(spec)
     assert ctl.arm()
     for _ in range(ramp_ticks(spec, cfg)):
-        assert ctl.receive(P.encode_command(default_command(spec), seq()))
+        assert ctl.receive(P.encode_command(JointCommand.hold(spec), seq()))
         out = ctl.tick(st)
         assert is_safe_command(out, spec, cfg)
     assert ctl.mode == Mode.ACTIVE
@@ -65,8 +52,8 @@ def test_roll_pitch_of_quaternion():
 
 def test_idle_is_zero_torque_and_commands_are_not_applied(spec):
     ctl, seq = SafetyController(spec), Seq()
-    assert ctl.receive(P.encode_command(default_command(spec), seq()))
-    out = ctl.tick(standing_state(spec))
+    assert ctl.receive(P.encode_command(JointCommand.hold(spec), seq()))
+    out = ctl.tick(RobotState.standing(spec))
     assert ctl.mode == Mode.IDLE
     assert not out.kp.any() and not out.kd.any() and not out.tau_ff.any()
     assert is_safe_command(out, spec)
@@ -76,7 +63,7 @@ def test_ramp_interpolates_linearly_to_default_pose_then_waits_for_the_policy(sp
     q0 = spec.joint_lower + 0.25 * (spec.joint_upper - spec.joint_lower)
     ctl, n = SafetyController(spec), ramp_ticks(spec)
     assert ctl.arm()
-    outs = [ctl.tick(standing_state(spec, q0)) for _ in range(n + 5)]    # no policy yet
+    outs = [ctl.tick(RobotState.standing(spec, q0)) for _ in range(n + 5)]    # no policy yet
     assert ctl.mode == Mode.RAMP
     np.testing.assert_allclose(outs[0].q_target, q0 + (spec.default_pose - q0) / n)
     k = n // 2
@@ -86,16 +73,16 @@ def test_ramp_interpolates_linearly_to_default_pose_then_waits_for_the_policy(sp
     np.testing.assert_array_equal(outs[3].kp, spec.kp)
     np.testing.assert_array_equal(outs[3].kd, spec.kd)
     assert n == round(2.0 / spec.control_dt)                             # ~2 s
-    assert ctl.receive(P.encode_command(default_command(spec), 5))
-    ctl.tick(standing_state(spec))
+    assert ctl.receive(P.encode_command(JointCommand.hold(spec), 5))
+    ctl.tick(RobotState.standing(spec))
     assert ctl.mode == Mode.ACTIVE
 
 
 def test_active_applies_validated_commands(pupper):
     ctl, seq = make_active(pupper)
     q = pupper.default_pose + 0.05
-    assert ctl.receive(P.encode_command(default_command(pupper, q), seq()))
-    out = ctl.tick(standing_state(pupper))
+    assert ctl.receive(P.encode_command(JointCommand.hold(pupper, q), seq()))
+    out = ctl.tick(RobotState.standing(pupper))
     np.testing.assert_allclose(out.q_target, q)
     assert ctl.applied >= 1
 
@@ -104,15 +91,15 @@ def test_active_applies_validated_commands(pupper):
 def test_watchdog_trips_after_more_than_n_periods_without_a_valid_command(spec, periods):
     cfg = SafetyConfig(watchdog_periods=periods)
     ctl, seq = make_active(spec, cfg)
-    assert ctl.receive(P.encode_command(default_command(spec, spec.default_pose + 0.01), seq()))
-    last = ctl.tick(standing_state(spec))
+    assert ctl.receive(P.encode_command(JointCommand.hold(spec, spec.default_pose + 0.01), seq()))
+    last = ctl.tick(RobotState.standing(spec))
     for _ in range(periods):      # within the window: hold the last command; garbage does not help
         ctl.receive(b"garbage")
-        out = ctl.tick(standing_state(spec))
+        out = ctl.tick(RobotState.standing(spec))
         assert ctl.mode == Mode.ACTIVE
         np.testing.assert_array_equal(out.q_target, last.q_target)
         np.testing.assert_array_equal(out.kp, last.kp)
-    out = ctl.tick(standing_state(spec))
+    out = ctl.tick(RobotState.standing(spec))
     assert ctl.mode == Mode.DAMPING and ctl.fault == "watchdog" and ctl.events["watchdog"] == 1
     assert not out.kp.any() and not out.tau_ff.any() and out.kd.min() > 0
     assert is_safe_command(out, spec, cfg)
@@ -122,14 +109,14 @@ def test_damping_is_latched_until_rearm_and_rearm_ramps_from_current_pose(pupper
     ctl, seq = make_active(pupper)
     ctl.estop("test")
     q_now = pupper.default_pose + 0.3
-    ctl.tick(standing_state(pupper, q_now))
+    ctl.tick(RobotState.standing(pupper, q_now))
     assert ctl.mode == Mode.DAMPING and ctl.fault == "test"
     for _ in range(20):                                  # valid commands do not leave DAMPING
-        ctl.receive(P.encode_command(default_command(pupper), seq()))
-        out = ctl.tick(standing_state(pupper, q_now))
+        ctl.receive(P.encode_command(JointCommand.hold(pupper), seq()))
+        out = ctl.tick(RobotState.standing(pupper, q_now))
         assert ctl.mode == Mode.DAMPING and not out.kp.any()
     assert ctl.arm()
-    out = ctl.tick(standing_state(pupper, q_now))
+    out = ctl.tick(RobotState.standing(pupper, q_now))
     assert ctl.mode == Mode.RAMP
     n = ramp_ticks(pupper)
     np.testing.assert_allclose(out.q_target, q_now + (pupper.default_pose - q_now) / n)
@@ -138,11 +125,11 @@ def test_damping_is_latched_until_rearm_and_rearm_ramps_from_current_pose(pupper
 def test_rearm_resets_the_sequence_baseline(pupper):
     ctl, seq = make_active(pupper)
     ctl.estop()
-    ctl.tick(standing_state(pupper))
-    assert not ctl.receive(P.encode_command(default_command(pupper), 1))    # older than baseline
+    ctl.tick(RobotState.standing(pupper))
+    assert not ctl.receive(P.encode_command(JointCommand.hold(pupper), 1))    # older than baseline
     ctl.arm()
-    ctl.tick(standing_state(pupper))
-    assert ctl.receive(P.encode_command(default_command(pupper), 1))        # restarted policy
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.receive(P.encode_command(JointCommand.hold(pupper), 1))        # restarted policy
 
 
 @pytest.mark.parametrize("mode", ["idle", "ramp", "active"])
@@ -153,9 +140,9 @@ def test_estop_from_every_mode(pupper, mode):
         ctl = SafetyController(pupper)
         if mode == "ramp":
             ctl.arm()
-            ctl.tick(standing_state(pupper))
+            ctl.tick(RobotState.standing(pupper))
     ctl.estop("button")
-    out = ctl.tick(standing_state(pupper))
+    out = ctl.tick(RobotState.standing(pupper))
     assert ctl.mode == Mode.DAMPING and ctl.events["estop"] == 1 and not out.kp.any()
 
 
@@ -165,8 +152,8 @@ def test_tilt_beyond_spec_limit_damps(spec, axis):
     lim = spec.max_roll if axis == "roll" else spec.max_pitch
     for angle, expect in ((0.95 * lim, Mode.ACTIVE), (1.05 * lim, Mode.DAMPING)):
         quat = quat_from_rp(angle, 0) if axis == "roll" else quat_from_rp(0, -angle)
-        ctl.receive(P.encode_command(default_command(spec), seq()))
-        ctl.tick(standing_state(spec, quat=quat))
+        ctl.receive(P.encode_command(JointCommand.hold(spec), seq()))
+        ctl.tick(RobotState.standing(spec, quat=quat))
         assert ctl.mode == expect
     assert ctl.fault == "tilt"
 
@@ -174,14 +161,14 @@ def test_tilt_beyond_spec_limit_damps(spec, axis):
 def test_arming_a_fallen_robot_damps_at_once(pupper):
     ctl = SafetyController(pupper)
     ctl.arm()
-    ctl.tick(standing_state(pupper, quat=quat_from_rp(1.2, 0)))
+    ctl.tick(RobotState.standing(pupper, quat=quat_from_rp(1.2, 0)))
     assert ctl.mode == Mode.DAMPING and ctl.fault == "tilt"
 
 
 @pytest.mark.parametrize("bad", ["nan_q", "zero_quat", "none"])
 def test_bad_state_damps(pupper, bad):
     ctl, seq = make_active(pupper)
-    st = standing_state(pupper)
+    st = RobotState.standing(pupper)
     if bad == "nan_q":
         st.q[4] = np.nan
     elif bad == "zero_quat":
@@ -197,7 +184,7 @@ def test_arm_is_ignored_while_powered(pupper):
 
 
 def _cmd_with(spec, **fields) -> JointCommand:
-    c = default_command(spec)
+    c = JointCommand.hold(spec)
     for k, v in fields.items():
         getattr(c, k)[:] = v
     return c
@@ -209,7 +196,7 @@ def _cmd_with(spec, **fields) -> JointCommand:
 ])
 def test_invalid_content_is_rejected_and_counted(pupper, field, value, reason):
     ctl, seq = make_active(pupper)
-    c = default_command(pupper)
+    c = JointCommand.hold(pupper)
     getattr(c, field)[3] = value
     assert not ctl.receive(P.encode_command(c, seq()))
     assert ctl.rejected == {reason: 1}
@@ -217,14 +204,14 @@ def test_invalid_content_is_rejected_and_counted(pupper, field, value, reason):
 
 def test_replays_and_protocol_errors_are_rejected_and_counted(pupper):
     ctl, seq = make_active(pupper)
-    data = P.encode_command(default_command(pupper), seq())
+    data = P.encode_command(JointCommand.hold(pupper), seq())
     assert ctl.receive(data)
     assert not ctl.receive(data)                                         # replay
-    assert not ctl.receive(P.encode_command(default_command(pupper), seq.n - 5))   # older
+    assert not ctl.receive(P.encode_command(JointCommand.hold(pupper), seq.n - 5))   # older
     assert not ctl.receive(data[:-3])
-    assert not ctl.receive(P.encode_state(standing_state(pupper), seq()))  # STATE on the cmd key
+    assert not ctl.receive(P.encode_state(RobotState.standing(pupper), seq()))  # STATE on the cmd key
     assert not ctl.receive_command(JointCommand(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)), seq())
-    assert not ctl.receive_command(default_command(pupper), -1)
+    assert not ctl.receive_command(JointCommand.hold(pupper), -1)
     assert ctl.rejected == {"stale_seq": 2, "bad_size": 1, "wrong_type": 1, "bad_shape": 1, "bad_seq": 1}
     assert ctl.status()["rejected"] == dict(ctl.rejected)
 
@@ -234,7 +221,7 @@ def test_targets_gains_and_torques_are_clamped(pupper):
     ctl, seq = make_active(pupper, cfg)
     c = _cmd_with(pupper, q_target=1e9, kp=1e300, kd=50.0, tau_ff=-1e6)
     assert ctl.receive(P.encode_command(c, seq()))
-    out = ctl.tick(standing_state(pupper))
+    out = ctl.tick(RobotState.standing(pupper))
     np.testing.assert_allclose(out.q_target, np.minimum(pupper.default_pose + 0.2, pupper.joint_upper))
     np.testing.assert_array_equal(out.kp, 2 * pupper.kp)
     np.testing.assert_array_equal(out.kd, 2 * pupper.kd)
@@ -249,8 +236,8 @@ def test_step_limit_walks_toward_a_far_target(pupper):
     target = pupper.joint_lower.copy()
     prev = None
     for _ in range(40):
-        ctl.receive(P.encode_command(default_command(pupper, target), seq()))
-        out = ctl.tick(standing_state(pupper))
+        ctl.receive(P.encode_command(JointCommand.hold(pupper, target), seq()))
+        out = ctl.tick(RobotState.standing(pupper))
         if prev is not None:
             assert is_safe_command(out, pupper, cfg, prev=prev)
         prev = out
@@ -258,15 +245,15 @@ def test_step_limit_walks_toward_a_far_target(pupper):
 
 
 def test_is_safe_command_detects_each_violation(pupper):
-    good = default_command(pupper)
+    good = JointCommand.hold(pupper)
     assert is_safe_command(good, pupper)
     for field, idx, value in [("q_target", 0, 5.0), ("q_target", 2, np.nan), ("kp", 1, -0.1),
                               ("kp", 1, 100.0), ("kd", 0, 10.0), ("tau_ff", 5, 1.8)]:
-        bad = default_command(pupper)
+        bad = JointCommand.hold(pupper)
         getattr(bad, field)[idx] = value
         assert not is_safe_command(bad, pupper), (field, value)
     assert not is_safe_command(JointCommand(np.zeros(11), good.kp, good.kd, good.tau_ff), pupper)
-    moved = default_command(pupper, pupper.default_pose + 0.3)
+    moved = JointCommand.hold(pupper, pupper.default_pose + 0.3)
     assert not is_safe_command(moved, pupper, SafetyConfig(max_step=0.2), prev=good)
 
 
@@ -288,15 +275,15 @@ def test_config_is_checked():
 
 def test_any_sample_on_the_estop_key_stops_the_robot(pupper):
     for payload in (P.encode_json(MsgType.ESTOP, {"reason": "red button"}, 1), b"", b"\xff" * 7,
-                    P.encode_command(default_command(pupper), 99)):
+                    P.encode_command(JointCommand.hold(pupper), 99)):
         ctl, _ = make_active(pupper)
         ctl.receive_estop(payload)
-        ctl.tick(standing_state(pupper))
+        ctl.tick(RobotState.standing(pupper))
         assert ctl.mode == Mode.DAMPING and ctl.fault.startswith("estop")
     assert ctl.rejected_other == {"estop:wrong_type": 1}
     ctl2, _ = make_active(pupper)
     ctl2.receive_estop(P.encode_json(MsgType.ESTOP, {"reason": "red button"}, 1))
-    ctl2.tick(standing_state(pupper))
+    ctl2.tick(RobotState.standing(pupper))
     assert ctl2.fault == "estop: red button" and ctl2.status()["fault"] == "estop: red button"
 
 
@@ -306,9 +293,9 @@ def test_only_a_valid_arm_for_this_robot_rearms(pupper):
     assert not ctl.receive_arm(P.encode_json(MsgType.ARM, {"robot_id": "pupper-02"}, 6), "pupper-01")
     assert not ctl.receive_arm(good[:-1], "pupper-01")
     assert not ctl.receive_arm(P.encode_json(MsgType.ESTOP, {"robot_id": "pupper-01"}, 7), "pupper-01")
-    ctl.tick(standing_state(pupper))
+    ctl.tick(RobotState.standing(pupper))
     assert ctl.mode == Mode.IDLE
     assert ctl.rejected_other == {"arm:wrong_robot": 1, "arm:bad_size": 1, "arm:wrong_type": 1}
     assert ctl.receive_arm(good, "pupper-01")
-    ctl.tick(standing_state(pupper))
+    ctl.tick(RobotState.standing(pupper))
     assert ctl.mode == Mode.RAMP

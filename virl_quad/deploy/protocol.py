@@ -109,6 +109,14 @@ class RobotState:
             accel=np.array([0.0, 0.0, 9.81]), contacts=np.ones(NUM_FEET), timestamp=timestamp,
         )
 
+    @classmethod
+    def standing(cls, spec, q: np.ndarray | None = None,
+                 quat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> "RobotState":
+        """A motionless state at ``q`` (rad; the spec's default pose if None) with orientation ``quat`` (xyzw)."""
+        st = cls.zeros(spec.default_pose if q is None else q)
+        st.quat = np.array(quat, dtype=np.float64)
+        return st
+
 
 @dataclass
 class JointCommand:
@@ -119,6 +127,12 @@ class JointCommand:
     kd: np.ndarray                     # N·m·s/rad (12)
     tau_ff: np.ndarray                 # N·m (12)
     ref_seq: int = 0                   # seq of the STATE it was computed from (0: unknown)
+
+    @classmethod
+    def hold(cls, spec, q: np.ndarray | None = None) -> "JointCommand":
+        """Hold ``q`` (rad; the default pose if None) with the spec's gains and no feed-forward."""
+        return cls(np.array(spec.default_pose if q is None else q, dtype=np.float64),
+                   np.array(spec.kp, dtype=np.float64), np.array(spec.kd, dtype=np.float64), np.zeros(NUM_JOINTS))
 
 
 @dataclass
