@@ -30,7 +30,7 @@ def test_every_gait_renders_to_npz_and_mp4(tmp_path, gait_motions, robot):
     for gait in gaits.GAIT_NAMES:
         video = tmp_path / f"{robot}_{gait}.mp4"
         d = render.render_demonstration(gait_motions[(robot, gait)], robot, min_seconds=0.0, video=video,
-                                        preview_size=64)
+                                        preview_size=64, preview="render")
         assert isinstance(d, Demonstration) and d.fps == pytest.approx(spec.control_hz)
         assert d.frames.shape[1:] == (48, 48) and d.frames.dtype == np.uint8
         # one whole cycle of control steps, the motion warped to fit it exactly

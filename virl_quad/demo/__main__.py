@@ -136,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output .npz")
     r.add_argument("--video", help="also write an .mp4 preview here")
     r.add_argument("--video-size", type=int, default=PREVIEW_SIZE, help="preview side in px (render preview)")
-    r.add_argument("--preview", choices=PREVIEWS, default="render",
+    r.add_argument("--preview", choices=PREVIEWS, default="frames",
                    help="render: larger RGB render; frames: the 48x48 frames enlarged 5x")
     r.add_argument("--seconds", type=float, default=2.0, help="at least this long, whole cycles (s)")
     r.set_defaults(func=cmd_render)
@@ -165,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("roundtrip", help="render -> .mp4 -> import error and forward-progress visibility")
     t.add_argument("--robot", default="pupper")
     t.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
-    t.add_argument("--preview", choices=PREVIEWS, default="render")
+    t.add_argument("--preview", choices=PREVIEWS, default="frames")
     t.add_argument("--seconds", type=float, default=2.0)
     t.set_defaults(func=cmd_roundtrip)
     return p

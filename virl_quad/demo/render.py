@@ -131,7 +131,7 @@ def enlarge(frames: np.ndarray, factor: int = 5) -> np.ndarray:
 
 def render_demonstration(motion: Motion, robot: str, source: str = "", min_seconds: float = 2.0,
                          video: str | os.PathLike | None = None, preview_size: int = PREVIEW_SIZE,
-                         cam: CameraParams | None = None, preview: str = "render") -> Demonstration:
+                         cam: CameraParams | None = None, preview: str = "frames") -> Demonstration:
     """Render ``motion`` (of ``robot``) into a :class:`Demonstration` at the control rate.
 
     ``video``: also write an ``.mp4`` there: ``preview="render"`` a larger RGB render
