@@ -89,7 +89,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           oracle_reward=oracle)
     source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
-                                                      lr=args.reward_lr, cyclic=demo.loop)
+                                                      lr=args.reward_lr, cyclic=demo.loop,
+                                                      w_d=args.reward_wd)
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

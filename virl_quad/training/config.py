@@ -36,6 +36,7 @@ class TrainArgs:
     randomize: bool = True             # domain randomisation during training
     reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
     reward_lr: float = 1e-4            # distance-model Adam learning rate (slow: a fast model saturates the reward)
+    reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus
     init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
@@ -53,6 +54,8 @@ def validate(args: TrainArgs) -> None:
     for name in ("num_envs", "iterations", "steps_per_env", "save_every"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
+    if args.reward_wd >= 0:
+        raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
         raise ValueError("--minutes must be >= 0 and episode/eval seconds > 0")
     hidden_sizes(args)

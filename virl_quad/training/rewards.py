@@ -39,8 +39,8 @@ class LearnedReward:
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
-                 cyclic: bool = False) -> None:
-        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic)
+                 cyclic: bool = False, w_d: float = -5.0) -> None:
+        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
         self.num_envs = num_envs
