@@ -48,7 +48,7 @@ def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> ar
     """An argparse parser with one ``--kebab-case`` option per field of dataclass ``cls``."""
     parser = argparse.ArgumentParser(description=description,
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter, **kwargs)
-    helps = field_comments(cls)
+    helps = {k: v.replace("%", "%%") for k, v in field_comments(cls).items()}  # argparse formats help with %
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
