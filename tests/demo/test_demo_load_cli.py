@@ -140,3 +140,12 @@ def test_cli_bad_input_process(tmp_path, case):
     assert p.returncode == 2, p.stderr
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in p.stderr, p.stderr
+
+
+def test_load_accepts_its_own_gait_label():
+    """A demonstration's source label ("gait:trot", as stored in policy metadata) loads again."""
+    from virl_quad import demo as demo_lib
+
+    d = demo_lib.load("trot", "pupper")
+    again = demo_lib.load(d.source, "pupper")
+    assert d.source == "gait:trot" and np.array_equal(again.frames, d.frames)

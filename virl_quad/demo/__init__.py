@@ -139,8 +139,9 @@ def load(source: str | os.PathLike, robot: str) -> Demonstration:
 
     robots.get(robot)
     text = str(source)
-    if text in GAIT_NAMES:
-        return gait_demonstration(text, robot)
+    name = text.removeprefix("gait:")  # renders of built-in gaits are labelled "gait:<name>"
+    if name in GAIT_NAMES:
+        return gait_demonstration(name, robot)
     path = Path(text)
     suffix = path.suffix.lower()
     if suffix not in (".npz",) + MOTION_SUFFIXES + VIDEO_SUFFIXES:
