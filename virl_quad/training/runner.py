@@ -98,7 +98,8 @@ class VirlRunner(OnPolicyRunner):
                 it = self.current_learning_iteration
                 if eval_every and it % eval_every == 0:
                     self.run_evaluation()
-                self._report(it, iterations, losses, (t1 - t0, t2 - t1, t3 - t2), start_wall, start_it, log)
+                self._report(it, iterations, losses, (t1 - t0, t2 - t1, t3 - t2), start_wall, start_it, log,
+                             minutes)
                 if it % save_every == 0:
                     self.save_checkpoint()
                 if minutes and time.time() - start_wall >= 60 * minutes:
@@ -142,7 +143,7 @@ class VirlRunner(OnPolicyRunner):
         return self.last_eval
 
     def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
-                log: Callable[[str], None]) -> None:
+                log: Callable[[str], None], minutes: float = 0.0) -> None:
         info = self.alg.last_reward_info
         rollout, returns, update = phases
         n = self.cfg["num_steps_per_env"] * self.env.num_envs
@@ -152,6 +153,8 @@ class VirlRunner(OnPolicyRunner):
         self._finished_lengths = self._finished_lengths[-200:]
         per_it = (time.time() - start_wall) / max(it - start_it, 1)
         eta = per_it * (total - it)
+        if minutes:
+            eta = min(eta, max(60 * minutes - (time.time() - start_wall), 0.0))
         score = self.last_eval.get("total")
         score_txt = f"{score:.3f}@{self.last_eval['iteration']}" if score is not None else "-"
         dist = info.get("distance/total", float("nan"))
