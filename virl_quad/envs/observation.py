@@ -21,14 +21,18 @@ LIN_VEL_SCALE = 2.0    # privileged observation = 2.0 * base velocity (m/s)
 
 def quat_rotate_inverse(quat_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate world vector ``v`` into the frame of orientation ``quat_xyzw`` (R^T v)."""
-    x, y, z, w = quat_xyzw
-    qv = np.array([x, y, z])
-    return v * (2.0 * w * w - 1.0) - np.cross(qv, v) * (2.0 * w) + qv * (2.0 * np.dot(qv, v))
+    x, y, z, w = (float(c) for c in quat_xyzw)
+    vx, vy, vz = (float(c) for c in v)
+    a, d = 2.0 * w * w - 1.0, 2.0 * (x * vx + y * vy + z * vz)
+    # v * a - (q x v) * 2w + q * d, written out: this runs in every control step
+    return np.array([vx * a - (y * vz - z * vy) * 2.0 * w + x * d,
+                     vy * a - (z * vx - x * vz) * 2.0 * w + y * d,
+                     vz * a - (x * vy - y * vx) * 2.0 * w + z * d])
 
 
 def projected_gravity(quat_xyzw: np.ndarray) -> np.ndarray:
     """Unit gravity direction in the body frame, from the IMU orientation (xyzw)."""
-    return quat_rotate_inverse(np.asarray(quat_xyzw, dtype=np.float64), np.array([0.0, 0.0, -1.0]))
+    return quat_rotate_inverse(quat_xyzw, (0.0, 0.0, -1.0))
 
 
 def policy_layout(with_phase: bool) -> list[tuple[str, int, float]]:
@@ -45,6 +49,9 @@ def policy_layout(with_phase: bool) -> list[tuple[str, int, float]]:
     return layout
 
 
+_INPUT_SIZES = [4, 3, 12, 12, 12]  # quat xyzw, gyro, q, dq, last action
+
+
 def policy_size(with_phase: bool) -> int:
     """Length of the policy observation."""
     return sum(n for _, n, _ in policy_layout(with_phase))
@@ -59,19 +66,16 @@ def policy_observation(spec: RobotSpec, quat_xyzw: np.ndarray, gyro_body: np.nda
     output (unscaled); phase: demonstration phase in [0, 1) or None.
     Raises ValueError on NaN/inf input or wrong sizes.
     """
-    parts = [
-        projected_gravity(quat_xyzw),
-        np.asarray(gyro_body, dtype=np.float64) * ANG_VEL_SCALE,
-        np.asarray(q, dtype=np.float64) - spec.default_pose,
-        np.asarray(dq, dtype=np.float64) * JOINT_VEL_SCALE,
-        np.asarray(last_action, dtype=np.float64),
-    ]
+    quat, gyro = np.asarray(quat_xyzw, dtype=np.float64), np.asarray(gyro_body, dtype=np.float64)
+    q, dq, act = (np.asarray(x, dtype=np.float64) for x in (q, dq, last_action))
+    sizes = [x.size for x in (quat, gyro, q, dq, act)]
+    if sizes != _INPUT_SIZES:
+        raise ValueError(f"observation inputs (quat, gyro, q, dq, last_action) have sizes {sizes}, "
+                         f"expected {_INPUT_SIZES}")
+    parts = [projected_gravity(quat), gyro * ANG_VEL_SCALE, q - spec.default_pose, dq * JOINT_VEL_SCALE, act]
     if phase is not None:
-        parts.append(np.array([np.sin(2 * np.pi * phase), np.cos(2 * np.pi * phase)]))
-    sizes = [len(p) for p in parts]
-    expected = [n for _, n, _ in policy_layout(phase is not None)]
-    if sizes != expected:
-        raise ValueError(f"observation inputs have sizes {sizes}, expected {expected}")
+        angle = 2.0 * np.pi * phase
+        parts.append(np.array([np.sin(angle), np.cos(angle)]))
     obs = np.concatenate(parts).astype(np.float32)
     if not np.all(np.isfinite(obs)):
         raise ValueError("observation contains NaN or inf")
