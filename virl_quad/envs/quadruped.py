@@ -12,6 +12,7 @@ clipped to the joint limits. No task reward (0.0): the VIRL reward is computed b
 
 from __future__ import annotations
 
+import dataclasses
 from collections import deque
 from dataclasses import dataclass
 
@@ -49,6 +50,17 @@ class EnvConfig:
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     terminate_on_fall: bool = True         # end the episode when the robot falls
     oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
+    sim_dt: float | None = None            # s, physics step; None = the robot's default
+    substeps: int | None = None            # physics steps per control step; None = the robot's default
+
+
+def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:
+    """The spec with the config's physics step / substeps, validated."""
+    dt = spec.sim_dt if cfg.sim_dt is None else float(cfg.sim_dt)
+    n = spec.substeps if cfg.substeps is None else int(cfg.substeps)
+    if not (0 < dt <= 0.01) or n < 1:
+        raise ValueError(f"sim_dt must be in (0, 0.01] s and substeps >= 1, got {dt} s and {n}")
+    return dataclasses.replace(spec, sim_dt=dt, substeps=n) if (dt, n) != (spec.sim_dt, spec.substeps) else spec
 
 
 class QuadrupedEnv(gym.Env):
@@ -57,6 +69,7 @@ class QuadrupedEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
     def __init__(self, spec: RobotSpec, cfg: EnvConfig, render_mode: str | None = None) -> None:
+        spec = _with_timing(spec, cfg)
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}

@@ -1,0 +1,58 @@
+"""The PyBullet world: PD torque limits, per-command gains, camera, ghost rendering."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from virl_quad import robots
+from virl_quad.sim.camera import CameraParams
+from virl_quad.sim.pd import pd_torque
+from virl_quad.sim.world import World
+
+
+def test_pd_torque_saturates() -> None:
+    tau = pd_torque(np.full(12, 10.0), np.zeros(12), np.zeros(12), np.full(12, 4.0), np.full(12, 0.4),
+                    np.full(12, 1.7))
+    np.testing.assert_allclose(tau, 1.7)
+    tau = pd_torque(np.zeros(12), np.zeros(12), np.full(12, 1.0), np.full(12, 4.0), np.full(12, 0.4),
+                    np.full(12, 1.7))
+    np.testing.assert_allclose(tau, -0.4)
+
+
+@pytest.mark.parametrize("robot", robots.names())
+def test_applied_torques_respect_limits(robot: str) -> None:
+    spec = robots.get(robot)
+    with World(spec) as w:
+        w.reset()
+        w.step(spec.default_pose + 1.0)  # far target: saturates
+        assert np.all(np.abs(w.state().tau) <= spec.torque_limit + 1e-9)
+        assert np.any(np.isclose(np.abs(w.state().tau), spec.torque_limit))
+
+
+def test_zero_gains_let_the_robot_sag() -> None:
+    spec = robots.get("pupper")
+    with World(spec) as held, World(spec) as limp:
+        held.reset()
+        limp.reset()
+        for _ in range(25):
+            held.step(spec.default_pose)
+            limp.step(spec.default_pose, kp=np.zeros(12), kd=np.zeros(12))
+        assert limp.state().base_pos[2] < held.state().base_pos[2] - 0.02
+
+
+def test_camera_frames_and_ghost_one_at_a_time() -> None:
+    spec = robots.get("pupper")
+    with World(spec, ghost=True) as w:
+        w.reset()
+        empty_ghost = w.render(body="ghost")  # ghost parked far away: nothing but ground and sky
+        w.set_pose([0.0, 0.0, spec.spawn_height], [0, 0, 0, 1], spec.default_pose, body="ghost")
+        agent, ghost = w.render(), w.render(body="ghost")
+        assert agent.shape == (48, 48) and agent.dtype == np.uint8
+        np.testing.assert_array_equal(agent, ghost)  # same pose, same place: the same picture
+        assert np.abs(agent.astype(int) - empty_ghost).mean() > 3
+        assert w.state().base_pos[2] > 0.1  # parking and restoring left the agent in place
+        rgb = w.render(size=96, rgb=True, cam=CameraParams.from_spec(spec).jittered(0.1, 0.0, 10.0))
+        assert rgb.shape == (96, 96, 3)
+        with pytest.raises(ValueError, match="unknown body"):
+            w.render(body="other")
