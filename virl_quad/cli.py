@@ -33,15 +33,13 @@ def field_comments(cls: type) -> dict[str, str]:
     return out
 
 
-def _arg_type(tp: Any) -> tuple[Callable | None, bool]:
-    """(converter, is_optional) of a field annotation."""
-    origin = typing.get_origin(tp)
+def _arg_type(tp: Any) -> Callable | None:
+    """The argparse converter of a field annotation; None for a bool (a --flag/--no-flag switch)."""
     args = [a for a in typing.get_args(tp) if a is not type(None)]
-    optional = origin is typing.Union and len(args) < len(typing.get_args(tp))
-    base = args[0] if optional and len(args) == 1 else tp
+    base = args[0] if len(args) == 1 else tp  # "X | None" -> X
     if base is bool:
-        return None, optional
-    return (base if base in (int, float, str) else str), optional
+        return None
+    return base if base in (int, float, str) else str
 
 
 def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> argparse.ArgumentParser:
@@ -53,7 +51,7 @@ def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> ar
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore
-        conv, _ = _arg_type(hints[f.name])
+        conv = _arg_type(hints[f.name])
         choices = f.metadata.get("choices")
         if conv is None:  # bool: --flag / --no-flag
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,

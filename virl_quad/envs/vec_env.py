@@ -44,18 +44,17 @@ class _Slice:
         return _stack(obs)
 
     def step(self, actions: np.ndarray, time_outs: np.ndarray) -> tuple:
-        """Step every env, resetting those that ended: (obs, final frames, terminated, base x, rewards)."""
+        """Step every env, resetting those that ended: (obs, final frames, terminated, rewards)."""
         obs, final, terminated = [], [], np.zeros(len(self.envs), bool)
-        progress, rewards = np.zeros(len(self.envs)), np.zeros(len(self.envs))
+        rewards = np.zeros(len(self.envs))
         for i, env in enumerate(self.envs):
-            o, rewards[i], term, _, info = env.step(actions[i])
+            o, rewards[i], term, _, _ = env.step(actions[i])
             terminated[i] = term
-            progress[i] = info["base_pos"][0]
             final.append({k: o[k] for k in _IMAGE_KEYS if k in o})
             if term or time_outs[i]:
                 o, _ = env.reset()
             obs.append(o)
-        return _stack(obs), _stack(final), terminated, progress, rewards
+        return _stack(obs), _stack(final), terminated, rewards
 
     def close(self) -> None:
         """Release every env."""
@@ -170,7 +169,7 @@ class QuadrupedVecEnv(VecEnv):
             raise ValueError(f"actions must be ({self.num_envs}, {self.num_actions}), got {tuple(a.shape)}")
         self.episode_length_buf += 1
         time_outs = (self.episode_length_buf >= self.max_episode_length).cpu().numpy()
-        obs, final, terminated, progress, env_rewards = self._call("step", self._split(a), self._split(time_outs))
+        obs, final, terminated, env_rewards = self._call("step", self._split(a), self._split(time_outs))
         time_outs &= ~terminated
         dones = terminated | time_outs
         self.episode_length_buf[torch.from_numpy(dones).to(self.device)] = 0
@@ -178,7 +177,6 @@ class QuadrupedVecEnv(VecEnv):
         extras = {
             "time_outs": torch.from_numpy(time_outs).to(self.device),
             "terminated": torch.from_numpy(terminated).to(self.device),
-            "base_x": torch.from_numpy(progress).float().to(self.device),
             "log": {},
         }
         for k, v in final.items():

@@ -38,7 +38,6 @@ class RobotState:
     base_ang_vel: np.ndarray       # rad/s, world (3)
     base_lin_vel_body: np.ndarray  # m/s, body frame (3)
     base_ang_vel_body: np.ndarray  # rad/s, body frame (3) = the IMU gyro
-    projected_gravity: np.ndarray  # unit gravity direction in the body frame (3)
     rpy: np.ndarray                # rad, roll pitch yaw (3)
     q: np.ndarray                  # rad (12)
     dq: np.ndarray                 # rad/s (12)
@@ -228,7 +227,6 @@ class World:
             time=self.time, base_pos=np.array(pos), base_quat=np.array(quat),
             base_lin_vel=lin, base_ang_vel=ang,
             base_lin_vel_body=rot.T @ lin, base_ang_vel_body=rot.T @ ang,
-            projected_gravity=rot.T @ np.array([0.0, 0.0, -1.0]),
             rpy=np.array(bc.getEulerFromQuaternion(quat)),
             q=q, dq=dq, tau=self.tau.copy(),
             foot_contact=np.array([f in touching for f in self.foot_ids]),
