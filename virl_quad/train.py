@@ -70,6 +70,31 @@ def _load_demo(args: TrainArgs, run_dir: Path):
     return d
 
 
+def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
+    """Frames of the multi-task clips (saved in the run folder so a resume sees the same ones)."""
+    saved = run_dir / "other_demos.npz"
+    if saved.exists():
+        with np.load(saved) as f:
+            return [f[k] for k in sorted(f.files)]
+    from virl_quad import demo as demo_lib
+    from virl_quad.demo.gaits import GAIT_NAMES
+
+    choice = args.other_demos.strip()
+    gait = args.demo.removeprefix("gait:")
+    if choice == "auto":
+        sources = [f"gait:{g}" for g in GAIT_NAMES if g != gait] if gait in GAIT_NAMES else []
+    elif choice in ("", "none"):
+        sources = []
+    else:
+        sources = [s.strip() for s in choice.split(",") if s.strip()]
+    clips = [demo_lib.load(s, args.robot).frames for s in sources]
+    run_dir.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(saved, **{f"clip{i:02d}": c for i, c in enumerate(clips)})
+    if sources:
+        print(f"multi-task clips for the distance model: {', '.join(sources)}", flush=True)
+    return clips
+
+
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
     from virl_quad.demo.score import evaluate
@@ -90,7 +115,9 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
                                                       lr=args.reward_lr, cyclic=demo.loop,
-                                                      w_d=args.reward_wd)
+                                                      w_d=args.reward_wd,
+                                                      other_clips=_other_clips(args, run_dir),
+                                                      adversarial_weight=args.adversarial_weight)
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

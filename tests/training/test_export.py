@@ -24,9 +24,28 @@ def test_eager_and_torchscript_agree(tmp_path: Path) -> None:
     x = np.random.default_rng(0).normal(size=(32, 44)).astype(np.float32)
     with torch.inference_mode():
         eager = actor(TensorDict({"policy": torch.from_numpy(x)}, batch_size=[32])).numpy()
-    scripted = np.stack([policy.act(row) for row in x])
+    with torch.inference_mode():
+        scripted = np.stack([policy.module(torch.from_numpy(row)[None])[0].numpy() for row in x])
     np.testing.assert_allclose(scripted, eager, atol=1e-6)
     assert np.abs(eager).max() > 0.01
+    # the numpy fast path the policy server uses reproduces the TorchScript module
+    assert policy.fast is not None
+    np.testing.assert_allclose(np.stack([policy.act(row) for row in x]), scripted, atol=1e-5)
+
+
+def test_fast_path_only_for_the_exported_structure(tmp_path: Path) -> None:
+    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    assert load_policy(path, numpy_fast_path=False).fast is None
+
+    class Other(torch.nn.Module):   # right sizes, different computation: must stay on torch
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            return torch.tanh(x[:, :12]) * 0.5
+
+    torch.jit.script(Other()).save(str(path))
+    policy = load_policy(path)
+    assert policy.fast is None
+    x = np.linspace(-1, 1, 44).astype(np.float32)
+    np.testing.assert_allclose(policy.act(x), np.tanh(x[:12]) * 0.5, atol=1e-6)
 
 
 def test_metadata_mismatch_is_refused(tmp_path: Path) -> None:

@@ -1,0 +1,36 @@
+"""Training options that shape the distance model's data: multi-task clips, adversarial weight."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from virl_quad.train import _other_clips
+from virl_quad.training.config import TrainArgs, validate
+from virl_quad.training.rewards import LearnedReward
+
+
+def test_auto_uses_the_other_builtin_gaits_and_is_saved(tmp_path: Path) -> None:
+    clips = _other_clips(TrainArgs(demo="trot"), tmp_path)
+    assert len(clips) == 4 and all(c.ndim == 3 and c.shape[1:] == (48, 48) for c in clips)
+    # a resume reads the saved clips, whatever the option now says
+    again = _other_clips(TrainArgs(demo="trot", other_demos="none"), tmp_path)
+    assert all(np.array_equal(a, b) for a, b in zip(clips, again)) and len(again) == 4
+
+
+def test_none_and_explicit_lists(tmp_path: Path) -> None:
+    assert _other_clips(TrainArgs(other_demos="none"), tmp_path / "a") == []
+    assert len(_other_clips(TrainArgs(other_demos="pace, bound"), tmp_path / "b")) == 2
+    with pytest.raises(ValueError, match="cannot use"):
+        _other_clips(TrainArgs(other_demos="no_such_clip.xyz"), tmp_path / "c")
+
+
+def test_adversarial_weight_reaches_the_pair_sampler() -> None:
+    frames = np.random.default_rng(0).integers(0, 255, (40, 48, 48), dtype=np.uint8)
+    low = LearnedReward("virl", frames, 2, 1, 0, adversarial_weight=0.1)
+    assert low.model.cfg.pair_weights == {"expert_vs_agent": 0.1}
+    assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pair_weights == {}
+    with pytest.raises(ValueError, match="adversarial-weight"):
+        validate(TrainArgs(adversarial_weight=-1.0))
