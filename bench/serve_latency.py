@@ -145,6 +145,7 @@ def run_peer(hal: FakeHal, proc: Proc, n: int, paced: int, label: str) -> dict[s
         a, lost = hal.series(count, rate)
         res[name] = (stats(a), lost)
     proc.stop()
+    res["log"] = proc.output()
     proc.close()
     return res
 
@@ -171,7 +172,7 @@ def main() -> None:
     with zenoh.open(load_config("peer", listen=[ep])) as session:
         hal = FakeHal(session, spec)
         server = Proc("virl_quad.deploy.serve", ["--policy", str(policy), "--robot-id", ROBOT_ID,
-                                                  "--connect", ep, "--quiet"], "serve")
+                                                  "--connect", ep], "serve")
         res_srv = run_peer(hal, server, args.n, args.paced, "the policy server")
         raw = Proc("bench.serve_latency", ["--echo", ep], "echo")
         res_raw = run_peer(hal, raw, args.n, args.paced, "the raw echo")
@@ -187,6 +188,9 @@ def main() -> None:
     for mode in ("back-to-back", "100 Hz"):
         r = res_srv[mode][0]["median"] / res_raw[mode][0]["median"]
         print(f"median ratio server / raw ({mode}): {r:.2f}  (goal <= 1.5)")
+    work = [ln.split("; ")[-1] for ln in res_srv["log"].splitlines() if "compute per command" in ln]
+    print(f"server's own time, state received -> command published ({len(work) and 'last 4096'}): "
+          f"{work[-1] if work else 'not reported'}")
     p99 = res_srv["100 Hz"][0]["p99"]
     print(f"server p99 at 100 Hz: {p99 / 1e3:.3f} ms  (goal <= 1 ms: {'met' if p99 <= 1000 else 'NOT met'})")
     print(f"load average after: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")

@@ -58,11 +58,15 @@ class NumpyMLP:
     reproduced the TorchScript output (see :func:`fast_path`)."""
 
     def __init__(self, mean: np.ndarray, denom: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        self.mean, self.denom, self.layers = mean, denom, layers
+        # fold the normaliser (x - mean) / denom into the first layer: one matmul fewer per call
+        w, b = layers[0]
+        w64 = w.astype(np.float64) / denom.astype(np.float64)[:, None]
+        b64 = b.astype(np.float64) - mean.astype(np.float64) @ w64
+        self.layers = [(w64.astype(np.float32), b64.astype(np.float32))] + list(layers[1:])
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Action(s) for observation(s) ``x`` [n] or [B, n] (float32)."""
-        h = (x - self.mean) / self.denom
+        h = x
         last = len(self.layers) - 1
         for i, (w, b) in enumerate(self.layers):
             h = h @ w + b

@@ -197,3 +197,17 @@ def test_seq_counter_starts_from_clock_and_increases():
     first = a()
     assert a() == first + 1 and first > 1_600_000_000 * 10**9
     assert P.SeqCounter(start=5)() == 5
+
+
+def test_command_encoder_matches_encode_command() -> None:
+    rng = np.random.default_rng(4)
+    kp, kd, ff = rng.uniform(0, 5, 12), rng.uniform(0, 1, 12), rng.normal(size=12)
+    enc = P.CommandEncoder(kp, kd, ff)
+    for seq in (1, 2**40, 2**64 - 1):
+        q = rng.normal(size=12)
+        want = P.encode_command(P.JointCommand(q, kp, kd, ff, ref_seq=seq // 2), seq, stamp_ns=123)
+        assert enc(q, seq // 2, seq, stamp_ns=123) == want
+    with pytest.raises(ValueError):
+        enc(np.zeros(11), 1, 1)
+    with pytest.raises(ValueError):
+        enc(np.zeros(12), -1, 1)

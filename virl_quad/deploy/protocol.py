@@ -232,6 +232,26 @@ def encode_command(cmd: JointCommand, seq: int, stamp_ns: int | None = None) -> 
     return _frame(MsgType.COMMAND, seq, payload, stamp_ns)
 
 
+class CommandEncoder:
+    """COMMAND messages with fixed gains and feed-forward, for a sender in a control loop.
+
+    Byte-identical to :func:`encode_command` (tested), with the constant part of the
+    payload (kp, kd, tau_ff) packed once: a policy server calls it once per state."""
+
+    def __init__(self, kp: Any, kd: Any, tau_ff: Any) -> None:
+        tail = np.concatenate([_vec(kp, NUM_JOINTS, "kp"), _vec(kd, NUM_JOINTS, "kd"),
+                               _vec(tau_ff, NUM_JOINTS, "tau_ff")]).astype("<f8").tobytes()
+        self._tail = tail
+
+    def __call__(self, q_target: np.ndarray, ref_seq: int, seq: int, stamp_ns: int | None = None) -> bytes:
+        """Encode one COMMAND with ``q_target`` (rad, 12) answering the state ``ref_seq``."""
+        q = _vec(q_target, NUM_JOINTS, "q_target")
+        if not 0 <= ref_seq < 2**64:
+            raise ValueError(f"ref_seq must fit in u64, got {ref_seq}")
+        payload = _CMD_HEAD.pack(ref_seq) + q.astype("<f8").tobytes() + self._tail
+        return _frame(MsgType.COMMAND, seq, payload, stamp_ns)
+
+
 def encode_json(mtype: MsgType, body: dict[str, Any], seq: int, stamp_ns: int | None = None) -> bytes:
     """Encode an ANNOUNCE, STATUS, ESTOP or ARM message with a JSON object payload."""
     if mtype not in _JSON_TYPES:
