@@ -55,8 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     demo = demo_lib.load(source, robot)
     if demo.motion is None:
         raise UserError(f"demonstration {source!r} has no reference motion: the ground-truth score needs one")
+    # the policy's own action mapping (its metadata), whatever the robot spec's default is now
+    actions = {"action_scale": float(policy.meta["action_scale"]), "action_clip": float(policy.meta["action_clip"])}
     kwargs = dict(episodes=args.episodes, seed=args.seed, episode_seconds=args.seconds,
-                  randomize=not args.no_randomize)
+                  randomize=not args.no_randomize, **actions)
     result = evaluate(policy_callable(policy), robot, demo, **kwargs)
     baseline = evaluate(zero_policy, robot, demo, **kwargs)
     keys = [k for k, v in result.items() if isinstance(v, (int, float))]
@@ -71,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.video:
         from virl_quad.training.report import side_by_side_video
 
-        print(f"video: {side_by_side_video(policy_callable(policy), robot, demo, args.video)}")
+        print(f"video: {side_by_side_video(policy_callable(policy), robot, demo, args.video, **actions)}")
     return 0
 
 

@@ -29,6 +29,7 @@ from virl_quad.training.config import TrainArgs, hidden_sizes, rsl_rl_config
 def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs]:
     """Rebuild the rsl-rl actor of a checkpoint (eval mode)."""
     args = TrainArgs(**data["config"])
+    checkpoint.check_action_facts(data, args.robot)
     hidden_sizes(args)
     n = obs_lib.policy_size(with_phase=True)
     obs = TensorDict({"policy": torch.zeros(1, n)}, batch_size=[1])

@@ -46,6 +46,7 @@ def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict
         if not run_dir.is_dir():
             raise UserError(f"resume folder {run_dir} does not exist")
         data = checkpoint.load(run_dir)
+        checkpoint.check_action_facts(data, data["config"]["robot"])
         saved = TrainArgs(**{k: v for k, v in data["config"].items() if k in {f.name for f in dataclasses.fields(TrainArgs)}})
         args = dataclasses.replace(saved, **{k: getattr(args, k) for k in explicit if k not in ("resume", "run_dir")},
                                    resume=str(run_dir), run_dir=str(run_dir))

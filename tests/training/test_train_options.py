@@ -34,3 +34,16 @@ def test_adversarial_weight_reaches_the_pair_sampler() -> None:
     assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pair_weights == {}
     with pytest.raises(ValueError, match="adversarial-weight"):
         validate(TrainArgs(adversarial_weight=-1.0))
+
+
+def test_checkpoint_action_facts_must_match_the_robot() -> None:
+    from virl_quad.training import checkpoint
+
+    facts = checkpoint.action_facts("pupper")
+    checkpoint.check_action_facts({"action_facts": facts}, "pupper")
+    with pytest.raises(ValueError, match="action_scale 0.3"):
+        checkpoint.check_action_facts({"action_facts": dict(facts, action_scale=0.3)}, "pupper")
+    with pytest.raises(ValueError, match="does not record"):
+        checkpoint.check_action_facts({}, "pupper")
+    with pytest.raises(ValueError, match="kp"):
+        checkpoint.check_action_facts({"action_facts": dict(facts, kp=[1.0] * 12)}, "pupper")

@@ -25,7 +25,9 @@ SPEC = RobotSpec(
     spawn_height=0.17,                                  # m, feet touch the ground in the default pose
     sim_dt=0.001,                                       # s (explicit PD on a 38 g shank needs 1 kHz)
     substeps=20,                                        # -> 50 Hz policy
-    action_scale=0.3,                                   # rad per unit action
+    action_scale=0.5,                                   # rad per unit action: +-1.0 rad at the env's clip of 2,
+                                                        # to reach the built-in gaits' joint range (knee down to
+                                                        # -0.73 rad from the default pose) and to overshoot the weak PD
     max_roll=0.4,                                       # rad (puppersim)
     max_pitch=0.4,                                      # rad
     min_base_height=0.05,                               # m

@@ -67,3 +67,27 @@ def load(path: str | Path) -> dict:
     if not isinstance(data, dict) or "actor_state_dict" not in data or "iteration" not in data:
         raise ValueError(f"checkpoint {path} is not a virl_quad training checkpoint")
     return data
+
+
+def action_facts(robot: str) -> dict:
+    """How actions become PD targets for ``robot`` now: what a checkpoint's policy was trained with."""
+    from virl_quad import robots
+    from virl_quad.envs.quadruped import EnvConfig
+
+    spec = robots.get(robot)
+    return {"action_scale": float(spec.action_scale),          # rad per unit action
+            "action_clip": float(EnvConfig().action_clip),     # |a| bound before scaling
+            "control_dt": float(spec.control_dt),              # s
+            "kp": [float(v) for v in spec.kp], "kd": [float(v) for v in spec.kd]}
+
+
+def check_action_facts(data: dict, robot: str) -> None:
+    """ValueError (one line) if the checkpoint's policy was trained with other action facts."""
+    saved, now = data.get("action_facts"), action_facts(robot)
+    if saved is None:
+        raise ValueError("checkpoint does not record the action scale, clip, control period and gains it was "
+                         "trained with (an older version wrote it): train again")
+    for key, want in now.items():
+        if not np.allclose(np.asarray(saved.get(key, np.nan), dtype=np.float64), want, atol=1e-9):
+            raise ValueError(f"checkpoint was trained with {key} {saved.get(key)}, but {robot} now has {want}: "
+                             f"its actions would mean other joint targets; train again")

@@ -22,9 +22,11 @@ def _gray_to_bgr(frame: np.ndarray, size: int) -> np.ndarray:
 
 
 def side_by_side_video(policy: Callable[[dict], np.ndarray], robot: str, demo: Demonstration,
-                       path: str | Path, seconds: float = 6.0, seed: int = 0) -> Path:
-    """Write an .mp4: the demonstration frame | the agent's 48x48 frame | the agent's RGB preview."""
-    env = make(robot, demo=demo, randomize=False, time_limit=False)
+                       path: str | Path, seconds: float = 6.0, seed: int = 0, **env_overrides) -> Path:
+    """Write an .mp4: the demonstration frame | the agent's 48x48 frame | the agent's RGB preview.
+
+    ``env_overrides``: EnvConfig fields (e.g. the policy's ``action_scale`` and ``action_clip``)."""
+    env = make(robot, demo=demo, randomize=False, time_limit=False, **env_overrides)
     obs, _ = env.reset(seed=seed, options={"demo_step": 0})
     size = 48 * SCALE
     path = Path(path)

@@ -57,7 +57,8 @@ class VirlRunner(OnPolicyRunner):
         """Everything needed to continue: networks, optimisers, normalisers, reward model, RNG."""
         return {**self.alg.save(), "reward": self.reward_source.state_dict(), "config": self.config,
                 "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
-                "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval}
+                "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
+                "action_facts": checkpoint.action_facts(self.config["robot"])}
 
     def save_checkpoint(self) -> Path:
         """Write ``checkpoint.pt`` atomically in the run folder."""
