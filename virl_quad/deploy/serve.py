@@ -19,6 +19,7 @@ commanding and waits for it to come back (then checks its ANNOUNCE again).
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import sys
 import threading
@@ -285,6 +286,10 @@ def main(config: ServeConfig) -> int:
     log = Log("serve", quiet=config.quiet)
     zenoh.init_log_from_env_or("error")
     runner = PolicyRunner(policy)
+    # Real-time hygiene: move everything loaded so far (torch alone is ~10^5 objects) out of
+    # the collector's reach, so a collection triggered while serving scans only new objects.
+    gc.collect()
+    gc.freeze()
     log(f"policy {config.policy} for {policy.meta['robot']} ({len(policy.meta['joint_names'])} joints, "
         f"{1 / float(policy.meta['control_dt']):g} Hz, demo frames {runner.frames}); waiting for HAL {robot_id!r}")
     with StopFlag() as stop:

@@ -1,0 +1,33 @@
+"""The one observation builder: closed-form gravity, NaN/inf rejection, layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from virl_quad import robots
+from virl_quad.envs import observation as O
+
+
+def test_projected_gravity_is_gravity_in_the_body_frame() -> None:
+    quats = Rotation.random(500, random_state=3).as_quat()
+    for q in quats:
+        want = Rotation.from_quat(q).inv().apply([0.0, 0.0, -1.0])
+        np.testing.assert_allclose(O.projected_gravity(q), want, atol=1e-12)
+        np.testing.assert_allclose(O.quat_rotate_inverse(q, (0.0, 0.0, -1.0)), want, atol=1e-12)
+    np.testing.assert_allclose(O.projected_gravity([0, 0, 0, 1.0]), [0, 0, -1.0])
+
+
+@pytest.mark.parametrize("block,value", [("gyro", np.nan), ("q", np.inf), ("dq", -np.inf), ("act", np.nan),
+                                         ("dq", 1e300)])   # 1e300 * 0.05 overflows float32 to inf
+def test_non_finite_input_is_refused(block: str, value: float) -> None:
+    spec = robots.get("pupper")
+    args = {"gyro": np.zeros(3), "q": spec.default_pose.copy(), "dq": np.zeros(12), "act": np.zeros(12)}
+    args[block] = args[block].copy()
+    args[block][1] = value
+    with pytest.raises(ValueError, match="NaN or inf"):
+        O.policy_observation(spec, [0, 0, 0, 1.0], args["gyro"], args["q"], args["dq"], args["act"], 0.25)
+    args[block][1] = 3.0e4   # large but finite: accepted
+    obs = O.policy_observation(spec, [0, 0, 0, 1.0], args["gyro"], args["q"], args["dq"], args["act"], 0.25)
+    assert obs.dtype == np.float32 and obs.shape == (O.policy_size(True),) and np.all(np.isfinite(obs))
