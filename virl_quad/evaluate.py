@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     if demo.motion is None:
         raise UserError(f"demonstration {source!r} has no reference motion: the ground-truth score needs one")
     # the policy's own action mapping (its metadata), whatever the robot spec's default is now
-    actions = {"action_scale": float(policy.meta["action_scale"]), "action_clip": float(policy.meta["action_clip"])}
+    actions = {"action_scale": float(policy.meta["action_scale"]), "action_clip": float(policy.meta["action_clip"]),
+               "max_target_step": policy.meta.get("max_target_step")}   # absent: exported before the limit
     kwargs = dict(episodes=args.episodes, seed=args.seed, episode_seconds=args.seconds,
                   randomize=not args.no_randomize, **actions)
     result = evaluate(policy_callable(policy), robot, demo, **kwargs)

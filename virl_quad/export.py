@@ -62,7 +62,8 @@ def export_actor(actor: MLPModel, robot: str, out: str | Path, demo: dict | None
     spec = robots.get(robot)
     scripted = torch.jit.script(actor.as_jit())
     meta = metadata_for(spec, with_phase=True, action_scale=spec.action_scale,
-                        action_clip=EnvConfig().action_clip, demo=demo, scores=scores)
+                        action_clip=EnvConfig().action_clip, demo=demo, scores=scores,
+                        max_target_step=EnvConfig().max_target_step)
     meta.update(extra or {})
     save_policy(scripted, meta, out)
     if onnx:

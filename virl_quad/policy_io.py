@@ -27,7 +27,7 @@ FORMAT = "virl_quad.policy/1"
 
 
 def metadata_for(spec: RobotSpec, with_phase: bool, action_scale: float, action_clip: float,
-                 demo: dict | None, scores: dict | None) -> dict:
+                 demo: dict | None, scores: dict | None, max_target_step: float | None = None) -> dict:
     """The metadata dict of a policy for ``spec``."""
     return {
         "format": FORMAT,
@@ -37,6 +37,7 @@ def metadata_for(spec: RobotSpec, with_phase: bool, action_scale: float, action_
         "default_pose": spec.default_pose.tolist(),         # rad
         "action_scale": action_scale,                       # rad per unit action
         "action_clip": action_clip,                         # |a| clipped to this before scaling
+        "max_target_step": max_target_step,                 # rad per control period (None: unlimited)
         "control_dt": spec.control_dt,                      # s
         "kp": spec.kp.tolist(), "kd": spec.kd.tolist(),     # N·m/rad, N·m·s/rad
         "torque_limit": spec.torque_limit.tolist(),         # N·m

@@ -105,3 +105,31 @@ def test_pd_holds_default_pose_under_randomisation(robot: str) -> None:
         assert terminated or truncated
     env.close()
     assert fell == []
+
+
+def test_targets_move_at_most_the_safety_layers_step() -> None:
+    from virl_quad.deploy.safety import SafetyConfig
+    from virl_quad.robots.spec import MAX_TARGET_STEP
+
+    assert SafetyConfig().max_step == MAX_TARGET_STEP   # training and robot share the limit
+    spec = robots.get("pupper")
+    env = make("pupper", randomize=False)
+    env.reset(seed=0)
+    u = env.unwrapped
+    prev = u.last_target.copy()
+    jump = np.array([0.0, 2.0, -2.0] * 4)               # 1 rad away for the hip and knee
+    for _ in range(3):
+        env.step(jump)
+        step = np.abs(u.last_target - prev)
+        assert step.max() <= MAX_TARGET_STEP + 1e-12 and step.max() > MAX_TARGET_STEP - 1e-9
+        prev = u.last_target.copy()
+    want = spec.clip_to_limits(spec.default_pose + u.action_scale * jump)
+    for _ in range(10):
+        env.step(jump)
+    np.testing.assert_allclose(u.last_target, want)      # reached after enough steps
+    env.close()
+    free = make("pupper", randomize=False, max_target_step=None)
+    free.reset(seed=0)
+    free.step(jump)
+    np.testing.assert_allclose(free.unwrapped.last_target, want)
+    free.close()

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from virl_quad.deploy.protocol import NUM_JOINTS, JointCommand, MsgType, ProtocolError, RobotState, decode
+from virl_quad.robots.spec import MAX_TARGET_STEP
 
 _EPS = 1e-9
 
@@ -53,7 +54,7 @@ class SafetyConfig:
 
     ramp_time: float = 2.0             # s, from the current pose to the default pose
     watchdog_periods: int = 3          # ACTIVE: more periods than this without a valid command -> DAMPING
-    max_step: float = 0.2              # rad per control period, change of an applied target
+    max_step: float = MAX_TARGET_STEP  # rad per control period, change of an applied target (as in training)
     gain_factor: float = 2.0           # kp, kd at most gain_factor x the spec gains
     damping_kd_factor: float = 1.0     # DAMPING kd = damping_kd_factor x spec kd (<= gain_factor)
     tilt_factor: float = 1.0           # fault beyond tilt_factor x spec max_roll / max_pitch

@@ -7,7 +7,8 @@ Observation (``gymnasium.spaces.Dict``):
 - ``agent_image`` uint8 (48, 48): the follow camera's view of the agent,
 - ``expert_image`` uint8 (48, 48): with a demonstration, its frame at the env's demonstration clock.
 Action: joint position offsets from the default pose, ``target = default + action_scale * a`` (rad),
-clipped to the joint limits. No task reward (0.0): the VIRL reward is computed by the trainer.
+clipped to the joint limits and moved at most ``max_target_step`` rad per step (the deploy safety
+layer's limit). No task reward (0.0): the VIRL reward is computed by the trainer.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.envs import observation as obs_lib
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
-from virl_quad.robots.spec import RobotSpec
+from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
 from virl_quad.sim.params import PhysicsParams
 from virl_quad.sim.world import RobotState, World
@@ -43,6 +44,8 @@ class EnvConfig:
     time_limit: bool = True                # truncate at episode_seconds (the VecEnv does it itself)
     action_scale: float | None = None      # rad per unit action; None = the robot's default
     action_clip: float = 2.0               # |a| is clipped to this before scaling
+    max_target_step: float | None = MAX_TARGET_STEP  # rad per control period a PD target may move
+                                           # (the deploy safety layer's limit); None: unlimited
     randomize: bool = True                 # domain randomisation on/off
     randomization: dict | None = None      # per-parameter range overrides, see DRConfig
     render: bool = True                    # produce agent_image (off: a blank frame, faster)
@@ -125,6 +128,7 @@ class QuadrupedEnv(gym.Env):
         self.last_action = np.zeros(12)
         self.steps = 0
         self._history.clear()
+        self.last_target = self.world.state().q.copy()   # rad: the rate limit starts from the pose
         self._state = self.world.state()
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
@@ -149,7 +153,11 @@ class QuadrupedEnv(gym.Env):
             raise ValueError("action contains NaN or inf")
         a = np.clip(a, -self.cfg.action_clip, self.cfg.action_clip)
         target = self.robot.clip_to_limits(self.robot.default_pose + self.action_scale * a)
+        step = self.cfg.max_target_step
+        if step is not None:   # as the safety layer does on the robot: rate limit, then the joint limits
+            target = self.robot.clip_to_limits(np.clip(target, self.last_target - step, self.last_target + step))
         self.world.step(target)
+        self.last_target = target
         self.steps += 1
         self.demo_step += 1
         self.last_action = a

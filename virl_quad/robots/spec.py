@@ -16,6 +16,9 @@ from pathlib import Path
 import numpy as np
 
 LEGS: tuple[str, ...] = ("FR", "FL", "RR", "RL")
+#: rad per control period: the largest change of a PD target. The env applies it in training
+#: and the deploy safety layer on the robot, so a policy meets the same limit in both.
+MAX_TARGET_STEP = 0.2
 JOINT_KINDS: tuple[str, ...] = ("abduction", "hip", "knee")
 NUM_JOINTS: int = 12
 

@@ -78,6 +78,7 @@ def action_facts(robot: str) -> dict:
     return {"action_scale": float(spec.action_scale),          # rad per unit action
             "action_clip": float(EnvConfig().action_clip),     # |a| bound before scaling
             "control_dt": float(spec.control_dt),              # s
+            "max_target_step": float(EnvConfig().max_target_step or 0.0),  # rad per step (0: none)
             "kp": [float(v) for v in spec.kp], "kd": [float(v) for v in spec.kd]}
 
 
