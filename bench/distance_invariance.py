@@ -1,0 +1,102 @@
+"""What does a trained distance model measure: the motion, or nuisances of the picture? (run by hand)
+
+    python bench/distance_invariance.py RUN_DIR [--steps 60]
+
+Loads the distance model of a training run (its ``checkpoint.pt``) and prints the mean
+distance d and reward exp(w_d d^2) between the run's demonstration and:
+
+- nuisance changes of the SAME motion, rendered here: the robot shifted along x by a
+  fraction of a ground-checker square (the follow camera then sees the ground pattern
+  at another phase), the camera turned or moved back a little;
+- real motion differences: the robot standing in its default pose (simulated, no
+  randomisation) and the run's multi-task clips (other gaits).
+
+A model that measures motion gives the nuisances a far smaller d than the other motions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from virl_quad import demo as demo_lib
+from virl_quad import envs, robots
+from virl_quad.demo.render import render_demonstration
+from virl_quad.reward.config import RewardConfig
+from virl_quad.reward.reward import build_reward
+from virl_quad.sim.camera import CameraParams
+from virl_quad.training import checkpoint
+
+SQUARE = 0.125  # m, side of a ground-checker square (16 per 2 m texture tile, sim/world.py)
+
+
+def load_model(run_dir: Path):
+    """The run's distance model and demonstration."""
+    data = checkpoint.load(run_dir)
+    d = data.get("reward", {})
+    if "net" not in d:
+        raise SystemExit(f"{run_dir}: this run has no learned distance model (oracle reward?)")
+    rm = build_reward(RewardConfig.from_dict(d["config"]), d["demo"].numpy(), [c.numpy() for c in d["clips"]],
+                      d["seed"])
+    rm.load_state_dict(d)
+    demo = demo_lib.load(str(run_dir / "demo.npz"), data["config"]["robot"])
+    return rm, demo, [c.numpy() for c in d["clips"]], data["config"]["robot"]
+
+
+def standing_frames(robot: str, demo, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Agent frames of the robot holding its default pose, and the expert frames beside them."""
+    env = envs.make(robot, demo=demo, randomize=False)
+    obs, _ = env.reset(seed=0, options={"demo_step": 0})
+    agent, expert = [obs["agent_image"]], [obs["expert_image"]]
+    for _ in range(n - 1):
+        obs, *_ = env.step(np.zeros(12))
+        agent.append(obs["agent_image"])
+        expert.append(obs["expert_image"])
+    env.close()
+    return np.array(agent), np.array(expert)
+
+
+def main() -> None:
+    """Print one row per comparison."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("run_dir", type=Path, help="training run folder (holds checkpoint.pt and demo.npz)")
+    p.add_argument("--steps", type=int, default=60, help="frames per sequence (the first 10 are not averaged)")
+    a = p.parse_args()
+    torch.set_num_threads(1)
+    rm, demo, clips, robot = load_model(a.run_dir)
+    if demo.motion is None:
+        raise SystemExit("the run's demonstration has no reference motion to re-render")
+    n, idx = a.steps, np.arange(a.steps) % demo.num_frames
+    expert = demo.frames[idx]
+    w_d = rm.cfg.w_d
+
+    def row(name: str, agent: np.ndarray, ref: np.ndarray = expert) -> None:
+        d = rm.distance(torch.from_numpy(ref[:, None]), torch.from_numpy(agent[:, None]))[10:, 0].numpy()
+        print(f"{name:<44}{d.mean():8.3f}{np.exp(w_d * d ** 2).mean():10.4f}")
+
+    def render(motion=None, cam=None) -> np.ndarray:
+        return render_demonstration(motion or demo.motion, robot, cam=cam).frames[idx]
+
+    print(f"run {a.run_dir}: {robot}, {demo.source}, w_d {w_d:g}; mean over frames 10..{n - 1}")
+    print(f"{'demonstration vs':<44}{'d':>8}{'reward':>10}")
+    row("itself", expert)
+    for frac in (0.25, 0.5, 1.0, 2.0):
+        m = demo.motion
+        shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([frac * SQUARE, 0.0, 0.0]))
+        row(f"itself, {frac:g} checker square ({frac * SQUARE * 100:.1f} cm) ahead", render(shifted))
+    cam = CameraParams.from_spec(robots.get(robot))
+    row("itself, camera turned 3 deg", render(cam=cam.jittered(0.0, 0.0, 3.0)))
+    row("itself, camera 3 % farther", render(cam=cam.jittered(0.03 * cam.distance, 0.0, 0.0)))
+    agent, ref = standing_frames(robot, demo, n)
+    row("the robot standing still (simulated)", agent, ref)
+    for k, c in enumerate(clips):
+        row(f"multi-task clip {k} (another gait)", c[np.arange(n) % len(c)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())
