@@ -96,6 +96,26 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
     return clips
 
 
+def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
+    """The demonstration re-rendered with the robot k/(n+1) of the ground pattern's period
+    (two checker squares) further along, k = 1..n: positives for the distance model."""
+    if args.ground_shifts == 0 or demo.motion is None:
+        return []
+    from virl_quad.demo.render import render_demonstration
+    from virl_quad.sim.world import CHECKER_SQUARE
+
+    period, n, m = 2 * CHECKER_SQUARE, args.ground_shifts, demo.motion
+    out = []
+    for k in range(1, n + 1):
+        shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
+        frames = render_demonstration(shifted, args.robot).frames
+        if frames.shape != demo.frames.shape:   # a motion rendered to another length: skip the material
+            return []
+        out.append(frames)
+    print(f"ground-shift positives: the demonstration re-rendered at {n} offsets along the ground", flush=True)
+    return out
+
+
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
     from virl_quad.demo.score import evaluate
@@ -118,7 +138,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                                                       lr=args.reward_lr, cyclic=demo.loop,
                                                       w_d=args.reward_wd,
                                                       other_clips=_other_clips(args, run_dir),
-                                                      adversarial_weight=args.adversarial_weight)
+                                                      adversarial_weight=args.adversarial_weight,
+                                                      demo_variants=_ground_shifts(args, demo))
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

@@ -47,3 +47,21 @@ def test_checkpoint_action_facts_must_match_the_robot() -> None:
         checkpoint.check_action_facts({}, "pupper")
     with pytest.raises(ValueError, match="kp"):
         checkpoint.check_action_facts({"action_facts": dict(facts, kp=[1.0] * 12)}, "pupper")
+
+
+def test_ground_shift_renders_match_the_demo() -> None:
+    from virl_quad import demo as demo_lib
+    from virl_quad.demo.demonstration import Demonstration
+    from virl_quad.train import _ground_shifts
+
+    d = demo_lib.load("trot", "pupper")
+    variants = _ground_shifts(TrainArgs(ground_shifts=2), d)
+    assert len(variants) == 2 and all(v.shape == d.frames.shape for v in variants)
+    # the robot is the same, only the ground moved: the frames differ, the demo is untouched
+    assert all(np.abs(v.astype(int) - d.frames).mean() > 1.0 for v in variants)
+    assert _ground_shifts(TrainArgs(ground_shifts=0), d) == []
+    no_motion = Demonstration(frames=d.frames, fps=d.fps, robot="pupper", source="video", camera=d.camera,
+                              motion=None, loop=True, displacement=None)
+    assert _ground_shifts(TrainArgs(ground_shifts=3), no_motion) == []
+    with pytest.raises(ValueError, match="ground-shifts"):
+        validate(TrainArgs(ground_shifts=-1))

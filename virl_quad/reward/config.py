@@ -12,7 +12,7 @@ from typing import Any
 VARIANTS: tuple[str, ...] = ("virl", "frame", "sequence", "no_ae", "gaifo")
 
 POSITIVE_PAIRS: tuple[str, ...] = ("gaussian_noise", "out_of_sync", "duplicate_first",
-                                   "duplicate_last", "same_source")
+                                   "duplicate_last", "same_source", "ground_shift")
 NEGATIVE_PAIRS: tuple[str, ...] = ("reversed", "frozen_frame", "shuffled_one", "shuffled_both",
                                    "expert_vs_agent", "other_clip")
 

@@ -46,6 +46,9 @@ class RobotState:
     fall_contact: bool             # a body/thigh link touches the ground
 
 
+CHECKER_SQUARE = 0.125  # m: side of a ground-checker square (16 per 2 m texture tile, see below)
+
+
 def _checker_texture() -> str:
     """Path of a fine gray checker texture (made once, cached in the temp folder)."""
     path = Path(tempfile.gettempdir()) / "virl_quad_checker_v1.png"

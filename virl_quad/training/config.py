@@ -38,6 +38,7 @@ class TrainArgs:
     reward_lr: float = 1e-4            # distance-model Adam learning rate (slow: a fast model saturates the reward)
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
+    ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the ground, as positive pairs that teach the distance model to ignore the ground pattern's phase (needs a reference motion; 0: off)
     adversarial_weight: float = 1.0    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; lower keeps the reward from saturating)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus
@@ -58,6 +59,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
+    if args.ground_shifts < 0:
+        raise ValueError(f"--ground-shifts must be >= 0, got {args.ground_shifts}")
     if args.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.adversarial_weight}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
