@@ -85,9 +85,9 @@ def _numpy_mlp(module: torch.jit.ScriptModule) -> NumpyMLP | None:
             return None
         children = list(mlp.named_children())
         kinds = [c.original_name for _, c in children]
-        if len(kinds) % 2 != 1 or kinds[::2] != ["Linear"] * (len(kinds) // 2 + 1) \
-                or kinds[1::2] != ["ELU"] * (len(kinds) // 2) or any(float(c.alpha) != 1.0 for c in
-                                                                     [c for _, c in children[1::2]]):
+        if kinds != ["Linear", "ELU"] * (len(kinds) // 2) + ["Linear"]:
+            return None
+        if any(float(c.alpha) != 1.0 for _, c in children[1::2]):
             return None
         mean = norm._mean.detach().numpy().astype(np.float32)[0]
         denom = (norm._std.detach() + float(norm.eps)).numpy().astype(np.float32)[0]

@@ -109,7 +109,9 @@ def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     for k in range(1, n + 1):
         shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
         frames = render_demonstration(shifted, args.robot).frames
-        if frames.shape != demo.frames.shape:   # a motion rendered to another length: skip the material
+        if frames.shape != demo.frames.shape:   # rendered to another length: no usable material
+            print(f"ground-shift positives skipped: the re-render has {frames.shape[0]} frames, the "
+                  f"demonstration {demo.frames.shape[0]}", flush=True)
             return []
         out.append(frames)
     print(f"ground-shift positives: the demonstration re-rendered at {n} offsets along the ground", flush=True)

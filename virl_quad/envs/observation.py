@@ -21,22 +21,11 @@ JOINT_VEL_SCALE = 0.05  # observation = 0.05 * dq (rad/s)
 LIN_VEL_SCALE = 2.0    # privileged observation = 2.0 * base velocity (m/s)
 
 
-def quat_rotate_inverse(quat_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate world vector ``v`` into the frame of orientation ``quat_xyzw`` (R^T v)."""
-    x, y, z, w = (float(c) for c in quat_xyzw)
-    vx, vy, vz = (float(c) for c in v)
-    a, d = 2.0 * w * w - 1.0, 2.0 * (x * vx + y * vy + z * vz)
-    # v * a - (q x v) * 2w + q * d, written out: this runs in every control step
-    return np.array([vx * a - (y * vz - z * vy) * 2.0 * w + x * d,
-                     vy * a - (z * vx - x * vz) * 2.0 * w + y * d,
-                     vz * a - (x * vy - y * vx) * 2.0 * w + z * d])
-
-
 def projected_gravity(quat_xyzw: np.ndarray) -> np.ndarray:
     """Unit gravity direction in the body frame, from the IMU orientation (xyzw, unit norm).
 
     ``R^T (0, 0, -1)``: minus the third row of the rotation matrix, written out (this runs
-    in every control step; equal to ``quat_rotate_inverse(q, (0, 0, -1))``, tested)."""
+    in every control step; tested against scipy)."""
     x, y, z, w = (float(c) for c in quat_xyzw)
     return np.array([2.0 * (w * y - x * z), -2.0 * (y * z + w * x), 2.0 * (x * x + y * y) - 1.0])
 

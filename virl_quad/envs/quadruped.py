@@ -128,8 +128,8 @@ class QuadrupedEnv(gym.Env):
         self.last_action = np.zeros(12)
         self.steps = 0
         self._history.clear()
-        self.last_target = self.world.state().q.copy()   # rad: the rate limit starts from the pose
         self._state = self.world.state()
+        self.last_target = self._state.q.copy()   # rad: the rate limit starts from the pose
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
