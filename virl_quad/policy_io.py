@@ -73,7 +73,7 @@ class NumpyMLP:
         for i, (w, b) in enumerate(self.layers):
             h = h @ w + b
             if i < last:
-                h = np.where(h > 0, h, np.expm1(np.minimum(h, 0)))   # ELU, alpha 1
+                h = np.maximum(h, 0) + np.expm1(np.minimum(h, 0))   # ELU, alpha 1
         return h
 
 
@@ -122,6 +122,9 @@ class LoadedPolicy:
     spec: RobotSpec
     fast: NumpyMLP | None = None
 
+    def __post_init__(self) -> None:
+        self.obs_size = int(self.meta["observation"]["size"])   # entries of the policy observation
+
     @property
     def with_phase(self) -> bool:
         """Whether the observation carries the demonstration phase."""
@@ -135,7 +138,7 @@ class LoadedPolicy:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action (12,) for one policy observation (n,); ValueError on NaN/inf or a wrong size."""
         x = np.asarray(obs, dtype=np.float32).reshape(-1)
-        if x.shape[0] != self.meta["observation"]["size"]:
+        if x.shape[0] != self.obs_size:
             raise ValueError(f"observation has {x.shape[0]} entries, policy expects {self.meta['observation']['size']}")
         if not math.isfinite(x.sum(dtype=np.float64)):   # finite iff every entry is (float32 summed in float64)
             raise ValueError("observation contains NaN or inf")
@@ -150,8 +153,12 @@ class LoadedPolicy:
 
     def joint_targets(self, action: np.ndarray) -> np.ndarray:
         """PD targets (rad) for an action, as in training: default + scale * clip(a), within joint limits."""
-        a = np.clip(action, -self.meta["action_clip"], self.meta["action_clip"])
-        return self.spec.clip_to_limits(self.spec.default_pose + self.meta["action_scale"] * a)
+        return self.spec.clip_to_limits(self.spec.default_pose + self.meta["action_scale"] * self.clip_action(action))
+
+    def clip_action(self, action: np.ndarray) -> np.ndarray:
+        """The action clipped to +-action_clip, as training applies and observes it."""
+        c = self.meta["action_clip"]
+        return np.minimum(np.maximum(action, -c), c)   # np.clip, 3x faster for 12 values
 
 
 def check_metadata(meta: dict, spec: RobotSpec) -> None:

@@ -211,3 +211,27 @@ def test_command_encoder_matches_encode_command() -> None:
         enc(np.zeros(11), 1, 1)
     with pytest.raises(ValueError):
         enc(np.zeros(12), -1, 1)
+
+
+@pytest.mark.parametrize("with_base", [False, True])
+def test_state_values_agree_with_decode(with_base):
+    st = _state(with_base)
+    st.dq[3] = np.inf                                    # carried as it is: the receiver judges it
+    data = P.encode_state(st, seq=9)
+    seq, f = P.decode_state_values(data)
+    body = decode(data, expect=MsgType.STATE).body
+    assert seq == 9
+    for name, sl in (("q", P.STATE_Q), ("dq", P.STATE_DQ), ("quat", P.STATE_QUAT), ("gyro", P.STATE_GYRO)):
+        np.testing.assert_array_equal(f[sl], getattr(body, name))
+
+
+def test_state_values_reject_what_decode_rejects():
+    data = P.encode_state(_state(False), seq=3)
+    bad = [b"", data[:31], data[:-1], data + b"\0", _reframe(data, magic=b"VIRX"), _reframe(data, version=2),
+           _reframe(data, mtype=99), data[:40] + bytes([data[40] ^ 4]) + data[41:], P.encode_command(_cmd(), seq=1)]
+    for b in bad:
+        with pytest.raises(ProtocolError) as want:
+            decode(b, expect=MsgType.STATE)
+        with pytest.raises(ProtocolError) as got:
+            P.decode_state_values(b)
+        assert got.value.reason == want.value.reason

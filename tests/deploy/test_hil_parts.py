@@ -62,14 +62,17 @@ def test_sim_backend_randomised_physics_is_seeded():
 def test_runner_uses_the_training_observation_and_skips_bad_states(untrained):
     spec = untrained.spec
     runner = PolicyRunner(untrained)
-    st = P.RobotState.zeros(spec.default_pose)
-    st.gyro = np.array([0.1, -0.2, 0.3])
+    rng = np.random.default_rng(4)
+    st = P.RobotState.zeros(spec.default_pose + rng.normal(0.0, 0.2, 12))
+    st.gyro, st.dq = np.array([0.1, -0.2, 0.3]), rng.normal(0.0, 2.0, 12)
+    unit = np.array([0.05, -0.1, 0.02, 1.0]) / np.linalg.norm([0.05, -0.1, 0.02, 1.0])
+    st.quat = 1.04 * unit                                  # off unit norm: the runner normalises it
     last = np.zeros(12)
     for k in range(3):
         out, reason = runner.handle(P.encode_state(st, 10 + k))
         assert reason == "" and out is not None
         msg = P.decode(out, expect=MsgType.COMMAND)
-        obs = policy_observation(spec, st.quat, st.gyro, st.q, st.dq, last, (k % 40) / 40)
+        obs = policy_observation(spec, unit, st.gyro, st.q, st.dq, last, (k % 40) / 40)
         action = untrained.act(obs)
         np.testing.assert_allclose(msg.body.q_target, untrained.joint_targets(action))
         np.testing.assert_array_equal(msg.body.kp, untrained.meta["kp"])

@@ -32,3 +32,13 @@ def test_physics_step_and_substeps_are_configurable() -> None:
     env.close()
     with pytest.raises(ValueError, match="substeps"):
         make("pupper", substeps=0)
+
+
+@pytest.mark.parametrize("name", ["pupper", "laikago"])
+def test_clip_to_limits_is_np_clip(name: str) -> None:
+    spec = robots.get(name)
+    q = np.random.default_rng(0).normal(0.0, 3.0, (50, 12))
+    q[3, 4], q[7, 0] = np.nan, np.inf
+    got = spec.clip_to_limits(q)
+    np.testing.assert_array_equal(got, np.clip(q, spec.joint_lower, spec.joint_upper))   # NaN stays NaN
+    assert got.shape == q.shape

@@ -41,10 +41,15 @@ _HEADER_NO_CRC: int = HEADER_SIZE - 4  # 28 bytes covered by the CRC, then the p
 # STATE payload: u32 flags, 4 x u8 contacts, then float64: q[12] dq[12] tau[12] quat[4] gyro[3]
 # accel[3] t_sensor base_pos[3] base_vel[3]
 _STATE_HEAD = struct.Struct("<I4B")
+_STATE_FLAGS = struct.Struct("<I")
 _STATE_NF = 3 * NUM_JOINTS + 4 + 3 + 3 + 1 + 3 + 3   # 53 doubles
 STATE_PAYLOAD_SIZE: int = _STATE_HEAD.size + 8 * _STATE_NF   # 432
+STATE_Q, STATE_DQ = slice(0, 12), slice(12, 24)          # in the doubles: rad, rad/s
+STATE_QUAT, STATE_GYRO = slice(36, 40), slice(40, 43)    # xyzw, rad/s
 STATE_FLAG_BASE = 0x1                  # base_pos / base_vel are valid (simulation only)
 CONTACT_UNKNOWN = 255                  # wire value of a foot without a contact sensor
+_CONTACT_OF_WIRE = np.ones(256)        # wire byte -> contact: 0 -> 0.0, 255 -> NaN, other -> 1.0
+_CONTACT_OF_WIRE[0], _CONTACT_OF_WIRE[CONTACT_UNKNOWN] = 0.0, np.nan
 
 # COMMAND payload: u64 ref_seq, then float64: q_target[12] kp[12] kd[12] tau_ff[12]
 _CMD_HEAD = struct.Struct("<Q")
@@ -73,6 +78,7 @@ class MsgType(IntEnum):
 
 
 _JSON_TYPES = frozenset({MsgType.ANNOUNCE, MsgType.STATUS, MsgType.ESTOP, MsgType.ARM})
+_TYPE_OF_CODE = {int(m): m for m in MsgType}   # header code -> MsgType (a dict lookup: decode is per state)
 _FIXED_SIZE = {MsgType.STATE: STATE_PAYLOAD_SIZE, MsgType.COMMAND: COMMAND_PAYLOAD_SIZE}
 
 
@@ -298,27 +304,7 @@ def decode(data: Any, expect: MsgType | None = None) -> Message:
     type known (bad_type), payload_len == bytes received and == the type's fixed size
     (bad_size), CRC (bad_crc), then ``expect`` (wrong_type) and JSON syntax (bad_payload).
     """
-    buf = _as_bytes(data)
-    if len(buf) < HEADER_SIZE:
-        raise ProtocolError("bad_size", f"{len(buf)} bytes, header needs {HEADER_SIZE}")
-    magic, version, mtype, seq, stamp_ns, plen, crc = HEADER.unpack_from(buf)
-    if magic != MAGIC:
-        raise ProtocolError("bad_magic", repr(magic))
-    if version != PROTOCOL_VERSION:
-        raise ProtocolError("bad_version", f"{version} != {PROTOCOL_VERSION}")
-    try:
-        mt = MsgType(mtype)
-    except ValueError:
-        raise ProtocolError("bad_type", str(mtype)) from None
-    if plen != len(buf) - HEADER_SIZE:
-        raise ProtocolError("bad_size", f"payload_len {plen}, received {len(buf) - HEADER_SIZE}")
-    want = _FIXED_SIZE.get(mt)
-    if (want is not None and plen != want) or (mt in _JSON_TYPES and plen > MAX_JSON_PAYLOAD):
-        raise ProtocolError("bad_size", f"{mt.name} payload of {plen} bytes")
-    if zlib.crc32(buf[HEADER_SIZE:], zlib.crc32(buf[:_HEADER_NO_CRC])) != crc:
-        raise ProtocolError("bad_crc")
-    if expect is not None and mt != expect:
-        raise ProtocolError("wrong_type", f"{mt.name}, expected {MsgType(expect).name}")
+    buf, mt, seq, stamp_ns = _checked_frame(data, expect)
     payload = buf[HEADER_SIZE:]
     if mt == MsgType.STATE:
         body: Any = _decode_state(payload)
@@ -329,14 +315,49 @@ def decode(data: Any, expect: MsgType | None = None) -> Message:
     return Message(mt, seq, stamp_ns, body)
 
 
+def decode_state_values(data: Any) -> tuple[int, np.ndarray]:
+    """A STATE's seq and its float64 values (read-only, indexed by ``STATE_Q``, ``STATE_DQ``,
+    ``STATE_QUAT``, ``STATE_GYRO``), after every check of ``decode(data, MsgType.STATE)``.
+
+    For a loop that runs once per state and needs only the measurements: no objects built."""
+    buf, _, seq, _ = _checked_frame(data, MsgType.STATE)
+    return seq, np.frombuffer(buf, dtype="<f8", count=_STATE_NF, offset=HEADER_SIZE + _STATE_HEAD.size)
+
+
+def _checked_frame(data: Any, expect: MsgType | None) -> tuple[bytes, MsgType, int, int]:
+    """(bytes, type, seq, stamp_ns) of a message whose header, size and CRC are valid (see :func:`decode`)."""
+    buf = _as_bytes(data)
+    if len(buf) < HEADER_SIZE:
+        raise ProtocolError("bad_size", f"{len(buf)} bytes, header needs {HEADER_SIZE}")
+    magic, version, mtype, seq, stamp_ns, plen, crc = HEADER.unpack_from(buf)
+    if magic != MAGIC:
+        raise ProtocolError("bad_magic", repr(magic))
+    if version != PROTOCOL_VERSION:
+        raise ProtocolError("bad_version", f"{version} != {PROTOCOL_VERSION}")
+    mt = _TYPE_OF_CODE.get(mtype)
+    if mt is None:
+        raise ProtocolError("bad_type", str(mtype))
+    if plen != len(buf) - HEADER_SIZE:
+        raise ProtocolError("bad_size", f"payload_len {plen}, received {len(buf) - HEADER_SIZE}")
+    want = _FIXED_SIZE.get(mt)
+    if (want is not None and plen != want) or (mt in _JSON_TYPES and plen > MAX_JSON_PAYLOAD):
+        raise ProtocolError("bad_size", f"{mt.name} payload of {plen} bytes")
+    view = memoryview(buf)   # CRC over the buffer without copying it
+    if zlib.crc32(view[HEADER_SIZE:], zlib.crc32(view[:_HEADER_NO_CRC])) != crc:
+        raise ProtocolError("bad_crc")
+    if expect is not None and mt != expect:
+        raise ProtocolError("wrong_type", f"{mt.name}, expected {MsgType(expect).name}")
+    return buf, mt, seq, stamp_ns
+
+
 def _decode_state(p: bytes) -> RobotState:
-    flags, *wire_contacts = _STATE_HEAD.unpack_from(p)
+    (flags,) = _STATE_FLAGS.unpack_from(p)
     f = np.frombuffer(p, dtype="<f8", count=_STATE_NF, offset=_STATE_HEAD.size).astype(np.float64)
-    contacts = np.array([np.nan if c == CONTACT_UNKNOWN else float(c != 0) for c in wire_contacts])
+    contacts = _CONTACT_OF_WIRE[np.frombuffer(p, dtype=np.uint8, count=NUM_FEET, offset=_STATE_FLAGS.size)]
     n = NUM_JOINTS
     has_base = bool(flags & STATE_FLAG_BASE)
     return RobotState(
-        q=f[0:n], dq=f[n:2 * n], tau=f[2 * n:3 * n], quat=f[36:40], gyro=f[40:43], accel=f[43:46],
+        q=f[STATE_Q], dq=f[STATE_DQ], tau=f[2 * n:3 * n], quat=f[STATE_QUAT], gyro=f[STATE_GYRO], accel=f[43:46],
         contacts=contacts, timestamp=float(f[46]),
         base_pos=f[47:50] if has_base else None, base_vel=f[50:53] if has_base else None,
     )

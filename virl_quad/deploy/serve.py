@@ -70,6 +70,7 @@ class PolicyRunner:
         self.kd = np.asarray(meta["kd"], dtype=np.float64)            # N·m·s/rad
         self.action_clip = float(meta["action_clip"])
         self.frames = policy.demo_frames
+        self.with_phase = policy.with_phase
         self.counts: Counter[str] = Counter()   # served, skipped reasons
         self._lock = threading.Lock()
         self._seq = P.SeqCounter()
@@ -85,7 +86,7 @@ class PolicyRunner:
 
     def phase(self) -> float | None:
         """Demonstration phase in [0, 1) of the next command (None if the policy has none)."""
-        if not self.policy.with_phase:
+        if not self.with_phase:
             return None
         return (self.k % self.frames) / self.frames if self.frames > 0 else 0.0
 
@@ -94,33 +95,33 @@ class PolicyRunner:
 
         Never raises: malformed, reordered or non-finite states are skipped with a reason."""
         try:
-            msg = P.decode(data, expect=MsgType.STATE)
+            seq, f = P.decode_state_values(data)
         except ProtocolError as e:
             return self._skip(f"bad_message:{e.reason}")
-        st = msg.body
         with self._lock:
-            if msg.seq <= self.last_state_seq:
+            if seq <= self.last_state_seq:
                 return self._skip("stale_state")
-            quat = st.quat
-            norm2 = float(quat @ quat)
+            quat = f[P.STATE_QUAT]
+            x, y, z, w = quat.tolist()
+            norm2 = x * x + y * y + z * z + w * w
             if not math.isfinite(norm2):
                 return self._skip("non_finite_state")
             if not 0.81 < norm2 < 1.21:                          # |quat| outside [0.9, 1.1]
                 return self._skip("bad_quaternion")
             try:                                                # raises on NaN/inf in gyro, q, dq
-                obs = policy_observation(self.spec, quat / math.sqrt(norm2), st.gyro, st.q, st.dq,
-                                         self.last_action, self.phase())
+                obs = policy_observation(self.spec, quat / math.sqrt(norm2), f[P.STATE_GYRO], f[P.STATE_Q],
+                                         f[P.STATE_DQ], self.last_action, self.phase())
             except ValueError:
                 return self._skip("non_finite_state")
-            self.last_state_seq = msg.seq
+            self.last_state_seq = seq
             try:
                 action = self.policy.act(obs)
             except ValueError:                                  # the policy produced NaN/inf
                 return self._skip("policy_non_finite")
-            q_target = self.policy.joint_targets(action)        # rad, within the joint limits
-            self.last_action = np.clip(action, -self.action_clip, self.action_clip)
+            self.last_action = self.policy.clip_action(action)  # as training observes it
+            q_target = self.policy.joint_targets(self.last_action)   # rad, within the joint limits
             self.k += 1
-            out = self._encode(q_target, msg.seq, self._seq())
+            out = self._encode(q_target, seq, self._seq())
         self.counts["served"] += 1
         return out, ""
 

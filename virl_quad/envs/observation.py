@@ -26,7 +26,7 @@ def projected_gravity(quat_xyzw: np.ndarray) -> np.ndarray:
 
     ``R^T (0, 0, -1)``: minus the third row of the rotation matrix, written out (this runs
     in every control step; tested against scipy)."""
-    x, y, z, w = (float(c) for c in quat_xyzw)
+    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64).tolist()
     return np.array([2.0 * (w * y - x * z), -2.0 * (y * z + w * x), 2.0 * (x * x + y * y) - 1.0])
 
 
@@ -63,15 +63,15 @@ def policy_observation(spec: RobotSpec, quat_xyzw: np.ndarray, gyro_body: np.nda
     """
     quat, gyro = np.asarray(quat_xyzw, dtype=np.float64), np.asarray(gyro_body, dtype=np.float64)
     q, dq, act = (np.asarray(x, dtype=np.float64) for x in (q, dq, last_action))
-    sizes = [x.size for x in (quat, gyro, q, dq, act)]
+    sizes = [quat.size, gyro.size, q.size, dq.size, act.size]
     if sizes != _INPUT_SIZES:
         raise ValueError(f"observation inputs (quat, gyro, q, dq, last_action) have sizes {sizes}, "
                          f"expected {_INPUT_SIZES}")
     parts = [projected_gravity(quat), gyro * ANG_VEL_SCALE, q - spec.default_pose, dq * JOINT_VEL_SCALE, act]
     if phase is not None:
-        angle = 2.0 * np.pi * phase
-        parts.append(np.array([np.sin(angle), np.cos(angle)]))
-    obs = np.concatenate(parts).astype(np.float32)
+        angle = 2.0 * math.pi * phase
+        parts.append((math.sin(angle), math.cos(angle)))
+    obs = np.concatenate(parts, dtype=np.float32)
     if not math.isfinite(obs.sum(dtype=np.float64)):   # a float64 sum of float32 values is finite iff all are
         raise ValueError("observation contains NaN or inf")
     return obs
