@@ -1,0 +1,103 @@
+"""How high can the ground-truth score go on this robot? A privileged tracker's score (run by hand).
+
+    python bench/tracking_bound.py [--robot pupper] [--demo trot] [--episodes 3] [--gains 0,1,3,6]
+
+A learned policy sees only proprioception; this controller cheats
+(``virl_quad.demo.tracker``): every control step it reads the reference joint angles
+q_ref at the demonstration clock and commands, through the environment's own action
+space (scale, clip, rate limit, PD gains, torque limits),
+
+    target = q_ref(t + lead) + g * (q_ref(t) - q)          (rad)
+
+i.e. PD tracking whose stiffness is raised (1 + g) times by feedback on the target. Episodes
+are the evaluation's (10 s, reference state initialisation at seeded random phases,
+domain randomisation on unless ``--no-randomize``). Printed beside it, from the same run:
+the score of holding the default pose, and the bar of the training issue (2x that).
+
+A joint-space tracker that knows the reference is an optimistic estimate of what a
+policy can reach: if its best score stays below the bar, the bar is out of reach for
+this robot model whatever the reward, and the gap says how far.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from virl_quad import demo as demo_lib
+from virl_quad import envs, robots
+from virl_quad.demo.score import TERMS, Trajectory, score_trajectory
+from virl_quad.demo.tracker import tracker_action
+from virl_quad.kinematics import Kinematics
+
+
+def run(robot: str, demo, gain: float | None, lead: float, episodes: int, randomize: bool) -> dict[str, float]:
+    """Mean figures over seeded episodes; ``gain`` None: hold the default pose (action 0)."""
+    spec = robots.get(robot)
+    m, kin = demo.motion, Kinematics(spec)
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=10.0)
+    u = env.unwrapped
+    out: dict[str, list[float]] = {k: [] for k in (*TERMS, "total", "survival", "travel", "ref_travel")}
+    try:
+        for ep in range(episodes):
+            env.reset(seed=ep)
+            rows, feet, times = [], [], []
+            fell = False
+            while True:
+                s = u.state
+                rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
+                feet.append(u.world.foot_positions())
+                times.append(u.demo_step / demo.fps)
+                if gain is None:
+                    action = np.zeros(len(spec.joint_names))
+                else:
+                    t = u.demo_step / demo.fps
+                    target = m.state_at(t + lead).q + gain * (m.state_at(t).q - s.q)
+                    action = (target - spec.default_pose) / u.action_scale
+                _, _, fell, truncated, _ = env.step(action)
+                if fell or truncated:
+                    break
+            cols = [np.array(c) for c in zip(*rows)]
+            res = score_trajectory(Trajectory(*cols, feet=np.array(feet)), m, np.array(times), robot, kin=kin)
+            for k in (*TERMS, "total"):
+                out[k].append(res[k])
+            out["survival"].append(0.0 if fell else 1.0)
+            out["travel"].append(float(cols[0][-1, 0] - cols[0][0, 0]))
+            out["ref_travel"].append(float(m.state_at(times[-1]).root_pos[0] - m.state_at(times[0]).root_pos[0]))
+    finally:
+        env.close()
+    res = {k: float(np.mean(v)) for k, v in out.items()}
+    res["speed_ratio"] = res["travel"] / res["ref_travel"] if abs(res["ref_travel"]) > 1e-6 else float("nan")
+    return res
+
+
+def main() -> None:
+    """Print one row for the default pose and one per tracker gain."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default="pupper")
+    p.add_argument("--demo", default="trot", help="built-in gait or motion file")
+    p.add_argument("--episodes", type=int, default=3)
+    p.add_argument("--gains", default="0,1,3,6", help="feedback gains g (comma-separated)")
+    p.add_argument("--lead", type=float, default=0.04, help="s the feed-forward reference runs ahead")
+    p.add_argument("--no-randomize", action="store_true", help="domain randomisation off")
+    a = p.parse_args()
+    d = demo_lib.load(a.demo, a.robot)
+    rand = not a.no_randomize
+    print(f"{a.robot}, demo {a.demo}: {a.episodes} episodes of 10 s, randomisation {'on' if rand else 'off'}, "
+          f"lead {a.lead:g} s")
+    print(f"{'controller':<22}" + "".join(f"{k[:9]:>10}" for k in (*TERMS, "total")) + f"{'survival':>10}{'speed':>8}")
+    rows = [("default pose", None)] + [(f"tracker g={float(g):g}", float(g)) for g in a.gains.split(",")]
+    base = None
+    best = 0.0
+    for name, g in rows:
+        r = run(a.robot, d, g, a.lead, a.episodes, rand)
+        base = r["total"] if g is None else base
+        best = max(best, r["total"]) if g is not None else best
+        print(f"{name:<22}" + "".join(f"{r[k]:10.3f}" for k in (*TERMS, "total"))
+              + f"{r['survival']:10.2f}{r['speed_ratio']:8.2f}", flush=True)
+    print(f"best tracker / default pose: {best / base:.2f}  (the training issue's bar: 2.00, score {2 * base:.3f})")
+
+
+if __name__ == "__main__":
+    main()
