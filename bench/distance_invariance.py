@@ -9,7 +9,7 @@ distance d and reward exp(w_d d^2) between the run's demonstration and:
   fraction of a ground-checker square (the follow camera then sees the ground pattern
   at another phase), the camera turned or moved back a little;
 - a good imitation done with physics: the simulated robot (no randomisation) following the
-  reference with ``virl_quad.demo.tracker`` (ground-truth score about 0.65, 1.5x standing);
+  reference with ``virl_quad.demo.tracker`` (ground-truth score about 0.7, 1.6x standing);
 - real motion differences: the robot standing in its default pose (simulated, no
   randomisation) and the run's multi-task clips (other gaits).
 

@@ -28,7 +28,7 @@ import numpy as np
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.demo.score import TERMS, Trajectory, score_trajectory
-from virl_quad.demo.tracker import tracker_action
+from virl_quad.demo.tracker import DEFAULT_LEAD, tracker_action
 from virl_quad.kinematics import Kinematics
 
 
@@ -49,12 +49,7 @@ def run(robot: str, demo, gain: float | None, lead: float, episodes: int, random
                 rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
                 feet.append(u.world.foot_positions())
                 times.append(u.demo_step / demo.fps)
-                if gain is None:
-                    action = np.zeros(len(spec.joint_names))
-                else:
-                    t = u.demo_step / demo.fps
-                    target = m.state_at(t + lead).q + gain * (m.state_at(t).q - s.q)
-                    action = (target - spec.default_pose) / u.action_scale
+                action = np.zeros(len(spec.joint_names)) if gain is None else tracker_action(env, gain, lead)
                 _, _, fell, truncated, _ = env.step(action)
                 if fell or truncated:
                     break
@@ -78,8 +73,8 @@ def main() -> None:
     p.add_argument("--robot", default="pupper")
     p.add_argument("--demo", default="trot", help="built-in gait or motion file")
     p.add_argument("--episodes", type=int, default=3)
-    p.add_argument("--gains", default="0,1,3,6", help="feedback gains g (comma-separated)")
-    p.add_argument("--lead", type=float, default=0.04, help="s the feed-forward reference runs ahead")
+    p.add_argument("--gains", default="1,2,3", help="feedback gains g (comma-separated)")
+    p.add_argument("--lead", type=float, default=DEFAULT_LEAD, help="s the feed-forward reference runs ahead")
     p.add_argument("--no-randomize", action="store_true", help="domain randomisation off")
     a = p.parse_args()
     d = demo_lib.load(a.demo, a.robot)

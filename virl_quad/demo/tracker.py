@@ -17,7 +17,7 @@ import numpy as np
 
 #: Best of a sweep on the Pupper trot with randomisation on (bench/tracking_bound.py).
 DEFAULT_GAIN = 2.0     # feedback gain on the joint error, dimensionless
-DEFAULT_LEAD = 0.04    # s
+DEFAULT_LEAD = 0.08    # s
 
 
 def tracker_action(env, gain: float = DEFAULT_GAIN, lead: float = DEFAULT_LEAD) -> np.ndarray:
