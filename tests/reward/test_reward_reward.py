@@ -121,6 +121,13 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
     other_rm = make(variant, RewardConfig(**{**small_cfg.to_dict(), "lr": 5e-4}), demo, other, agent_episode)
     with pytest.raises(ValueError, match="different RewardConfig"):
         other_rm.load_state_dict(torch.load(path, weights_only=True))
+    # the pair-sampling weights may change on resume (--adversarial-weight): same network, same rewards
+    reweighted = make(variant, RewardConfig(**{**small_cfg.to_dict(), "pair_weights": {"expert_vs_agent": 0.0}}),
+                      demo, other, agent_episode)
+    reweighted.load_state_dict(torch.load(path, weights_only=True))
+    fresh = RewardModel.load(path)                                # the saved state, not updated since
+    assert torch.equal(fresh.recompute(agent, expert, dones, s), reweighted.recompute(agent, expert, dones, s))
+    assert reweighted.cfg.pair_weights == {"expert_vs_agent": 0.0}
 
 
 def test_bad_inputs_raise_one_line_value_errors(trained_rm):

@@ -214,10 +214,13 @@ class RewardModel:
         }
 
     def load_state_dict(self, d: dict) -> None:
-        """Restore network, optimiser and RNG states saved by a model with the same config."""
+        """Restore network, optimiser and RNG states saved by a model with the same config
+        (the pair-sampling weights aside: a resumed run may draw pairs differently)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
-        if d["config"] != self.cfg.to_dict():
+        saved, mine = dict(d["config"]), self.cfg.to_dict()
+        saved.pop("pair_weights", None), mine.pop("pair_weights")   # how pairs are drawn may change on resume
+        if saved != mine:
             raise ValueError("state was saved with a different RewardConfig")
         self.net.load_state_dict(d["net"])
         self.trainer.load_state_dict(d["trainer"])
