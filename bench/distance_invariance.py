@@ -32,25 +32,10 @@ from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.demo.render import render_demonstration
 from virl_quad.demo.tracker import tracker_action
-from virl_quad.reward.config import RewardConfig
-from virl_quad.reward.reward import build_reward
 from virl_quad.sim.camera import CameraParams
 from virl_quad.training import checkpoint
 
 SQUARE = 0.125  # m, side of a ground-checker square (16 per 2 m texture tile, sim/world.py)
-
-
-def load_model(run_dir: Path):
-    """The run's distance model and demonstration."""
-    data = checkpoint.load(run_dir)
-    d = data.get("reward", {})
-    if "net" not in d:
-        raise SystemExit(f"{run_dir}: this run has no learned distance model (oracle reward?)")
-    rm = build_reward(RewardConfig.from_dict(d["config"]), d["demo"].numpy(), [c.numpy() for c in d["clips"]],
-                      d["seed"])
-    rm.load_state_dict(d)
-    demo = demo_lib.load(str(run_dir / "demo.npz"), data["config"]["robot"])
-    return rm, demo, [c.numpy() for c in d["clips"]], data["config"]["robot"]
 
 
 def simulated_frames(robot: str, demo, n: int, track: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +59,10 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=60, help="frames per sequence (the first 10 are not averaged)")
     a = p.parse_args()
     torch.set_num_threads(1)
-    rm, demo, clips, robot = load_model(a.run_dir)
+    try:
+        rm, demo, clips, robot = checkpoint.load_reward_model(a.run_dir)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
     if demo.motion is None:
         raise SystemExit("the run's demonstration has no reference motion to re-render")
     n, idx = a.steps, np.arange(a.steps) % demo.num_frames

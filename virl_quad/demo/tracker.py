@@ -20,14 +20,17 @@ DEFAULT_GAIN = 2.0     # feedback gain on the joint error, dimensionless
 DEFAULT_LEAD = 0.08    # s
 
 
-def tracker_action(env, gain: float = DEFAULT_GAIN, lead: float = DEFAULT_LEAD) -> np.ndarray:
-    """The action for the current step of ``env`` (a ``virl_quad.envs`` environment whose
-    demonstration has a reference motion), in the env's units (target offset / action scale)."""
+def tracker_action(env, gain: float = DEFAULT_GAIN, lead: float = DEFAULT_LEAD, motion=None,
+                   delay: float = 0.0) -> np.ndarray:
+    """The action for the current step of ``env`` (a ``virl_quad.envs`` environment), in the
+    env's units (target offset / action scale). ``motion``: what to track (default: the
+    demonstration's reference motion); ``delay`` (s): track it that much behind the
+    demonstration clock (half a cycle: the right motion out of phase)."""
     u = env.unwrapped
-    motion = u.demo.motion
+    motion = motion if motion is not None else u.demo.motion
     if motion is None:
         raise ValueError("the demonstration has no reference motion to track")
-    t = u.demo_step / u.demo.fps                     # s, demonstration clock
+    t = u.demo_step / u.demo.fps - delay             # s, demonstration clock
     q_ref = motion.state_at(t).q
     target = motion.state_at(t + lead).q + gain * (q_ref - u.state.q)
     return (target - u.robot.default_pose) / u.action_scale

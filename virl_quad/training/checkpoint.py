@@ -92,3 +92,23 @@ def check_action_facts(data: dict, robot: str) -> None:
         if not np.allclose(np.asarray(saved.get(key, np.nan), dtype=np.float64), want, atol=1e-9):
             raise ValueError(f"checkpoint was trained with {key} {saved.get(key)}, but {robot} now has {want}: "
                              f"its actions would mean other joint targets; train again")
+
+
+def load_reward_model(run_dir: str | Path):
+    """A run's distance model with its demonstration: ``(reward model, Demonstration, clips, robot)``.
+
+    ValueError (one line) when the run has no checkpoint or no learned distance (oracle)."""
+    from virl_quad import demo as demo_lib
+    from virl_quad.reward.config import RewardConfig
+    from virl_quad.reward.reward import build_reward
+
+    run_dir = Path(run_dir)
+    data = load(run_dir)
+    d = data.get("reward", {})
+    if "net" not in d:
+        raise ValueError(f"{run_dir}: this run has no learned distance model (oracle reward?)")
+    clips = [c.numpy() for c in d["clips"]]
+    rm = build_reward(RewardConfig.from_dict(d["config"]), d["demo"].numpy(), clips, d["seed"])
+    rm.load_state_dict(d)
+    robot = data["config"]["robot"]
+    return rm, demo_lib.load(str(run_dir / "demo.npz"), robot), clips, robot
