@@ -1,6 +1,7 @@
 """Does a run's learned reward rank physical rollouts as the ground-truth score does? (run by hand)
 
     python bench/reward_alignment.py RUN_DIR [--seconds 4] [--seeds 2] [--no-randomize]
+    python bench/reward_alignment.py --fresh [--variant virl] [--adversarial-weight 1] [--updates 600]
 
 Rollouts of the simulated robot (physics, the training environment) from controllers of
 graded quality, all built on the privileged tracker of ``virl_quad.demo.tracker``:
@@ -14,6 +15,12 @@ Prints one row per controller (means over seeds), sorted by score, and Spearman'
 correlation between reward and score over all rollouts: near 1, following the reward
 climbs the score; near 0, the reward gives a policy nothing to climb. A fast check of
 a reward design, without a training run.
+
+``--fresh``: instead of a run's model, a new one (``--variant``, ``--adversarial-weight``,
+``--ground-shifts`` as in training) is trained here for ``--updates`` batches on the
+built-in demonstration, the other built-in gaits as multi-task clips, and, as agent
+data, rollouts of the same controllers from other seeds (a diverse stand-in for a
+policy's rollouts); the alignment is then measured on the usual seeds.
 """
 
 from __future__ import annotations
@@ -28,8 +35,11 @@ from scipy.stats import spearmanr
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs
+from virl_quad.demo.render import ground_shifted
 from virl_quad.demo.score import Trajectory, score_trajectory
 from virl_quad.demo.tracker import tracker_action
+from virl_quad.reward.config import RewardConfig
+from virl_quad.reward.reward import build_reward
 from virl_quad.training import checkpoint
 
 SKIP = 10  # first frames of an episode left out (the sequence encoder warms up)
@@ -74,19 +84,55 @@ def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool):
     return np.array(agent), np.array(expert), float(score)
 
 
+def fresh_model(a: argparse.Namespace):
+    """A distance model trained here (see the module doc); (model, demo, robot)."""
+    from virl_quad.demo.gaits import GAIT_NAMES
+
+    robot, gait = a.robot, a.demo
+    demo = demo_lib.load(gait, robot)
+    clips = [demo_lib.load(g, robot).frames for g in GAIT_NAMES if g != gait]
+    weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
+    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
+    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", ground_shifted(demo, robot, a.ground_shifts))
+    for name, act in controllers(robot, float(demo.motion.duration)).items():
+        for seed in range(1000, 1000 + a.train_seeds):
+            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize)
+            rm.add_episode(agent, expert)
+    print(f"training a fresh {a.variant} model: {a.updates} updates, adversarial weight "
+          f"{a.adversarial_weight:g}, {a.ground_shifts} ground shifts", file=sys.stderr, flush=True)
+    for k in range(0, a.updates, 100):
+        info = rm.update(min(100, a.updates - k))
+        print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
+    return rm, demo, robot
+
+
 def main() -> int:
     """Print the table and the rank correlation."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("run_dir", type=Path, help="training run folder (holds checkpoint.pt and demo.npz)")
+    p.add_argument("run_dir", type=Path, nargs="?", help="training run folder (holds checkpoint.pt and demo.npz)")
     p.add_argument("--seconds", type=float, default=4.0, help="s per rollout")
     p.add_argument("--seeds", type=int, default=2, help="rollouts per controller (seeded start phases)")
     p.add_argument("--no-randomize", action="store_true", help="domain randomisation off")
+    p.add_argument("--fresh", action="store_true", help="train a new model here instead of loading a run's")
+    p.add_argument("--robot", default="pupper", help="--fresh: robot")
+    p.add_argument("--demo", default="trot", help="--fresh: built-in gait to imitate")
+    p.add_argument("--variant", default="virl", help="--fresh: reward variant (virl, frame, sequence, no_ae)")
+    p.add_argument("--adversarial-weight", type=float, default=1.0, help="--fresh: expert-vs-agent pair weight")
+    p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders")
+    p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
+    p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
+    p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")
     a = p.parse_args()
     torch.set_num_threads(1)
-    try:
-        rm, demo, _, robot = checkpoint.load_reward_model(a.run_dir)
-    except ValueError as e:
-        raise SystemExit(f"error: {e}") from None
+    if a.fresh:
+        rm, demo, robot = fresh_model(a)
+    elif a.run_dir is None:
+        raise SystemExit("error: give a RUN_DIR or --fresh")
+    else:
+        try:
+            rm, demo, _, robot = checkpoint.load_reward_model(a.run_dir)
+        except ValueError as e:
+            raise SystemExit(f"error: {e}") from None
     if demo.motion is None:
         raise SystemExit("error: the run's demonstration has no reference motion (the score needs one)")
     rows, rewards, scores = [], [], []
@@ -102,7 +148,8 @@ def main() -> int:
         rewards += r_
         scores += s_
         print(f"  {name:<30} reward {rows[-1][1]:.3f}  score {rows[-1][2]:.3f}", file=sys.stderr, flush=True)
-    print(f"run {a.run_dir}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
+    what = f"a fresh {a.variant} model (adversarial {a.adversarial_weight:g})" if a.fresh else f"run {a.run_dir}"
+    print(f"{what}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
           f"randomisation {'off' if a.no_randomize else 'on'}")
     print(f"{'controller':<32}{'reward':>8}{'score':>8}")
     for name, r, s in sorted(rows, key=lambda row: -row[2]):

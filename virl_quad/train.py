@@ -97,24 +97,17 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
 
 
 def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
-    """The demonstration re-rendered with the robot k/(n+1) of the ground pattern's period
-    (two checker squares) further along, k = 1..n: positives for the distance model."""
+    """Ground-shift positives for the distance model (see render.ground_shifted)."""
     if args.ground_shifts == 0 or demo.motion is None:
         return []
-    from virl_quad.demo.render import render_demonstration
-    from virl_quad.sim.world import CHECKER_SQUARE
+    from virl_quad.demo.render import ground_shifted
 
-    period, n, m = 2 * CHECKER_SQUARE, args.ground_shifts, demo.motion
-    out = []
-    for k in range(1, n + 1):
-        shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
-        frames = render_demonstration(shifted, args.robot).frames
-        if frames.shape != demo.frames.shape:   # rendered to another length: no usable material
-            print(f"ground-shift positives skipped: the re-render has {frames.shape[0]} frames, the "
-                  f"demonstration {demo.frames.shape[0]}", flush=True)
-            return []
-        out.append(frames)
-    print(f"ground-shift positives: the demonstration re-rendered at {n} offsets along the ground", flush=True)
+    out = ground_shifted(demo, args.robot, args.ground_shifts)
+    if out:
+        print(f"ground-shift positives: the demonstration re-rendered at {len(out)} offsets along the ground",
+              flush=True)
+    else:
+        print("ground-shift positives skipped: the re-render has another length than the demonstration", flush=True)
     return out
 
 

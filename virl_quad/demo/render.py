@@ -156,6 +156,26 @@ def render_demonstration(motion: Motion, robot: str, source: str = "", min_secon
                          displacement=root_displacement(motion, n, fps))
 
 
+def ground_shifted(demo: Demonstration, robot: str, n: int) -> list[np.ndarray]:
+    """The demonstration's frames re-rendered with the robot k/(n+1) of the ground pattern's
+    period (two checker squares) further along, k = 1..n: the same motion where the follow
+    camera sees the ground at another phase (positives for a distance model). Empty when
+    the demonstration has no motion or a re-render comes out at another length."""
+    from virl_quad.sim.world import CHECKER_SQUARE
+
+    if n <= 0 or demo.motion is None:
+        return []
+    period, m = 2 * CHECKER_SQUARE, demo.motion   # m
+    out = []
+    for k in range(1, n + 1):
+        shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
+        frames = render_demonstration(shifted, robot).frames
+        if frames.shape != demo.frames.shape:
+            return []
+        out.append(frames)
+    return out
+
+
 def save_npz(demo: Demonstration, path: str | os.PathLike) -> Path:
     """Save a demonstration as a compressed ``.npz`` (atomic write); returns the path."""
     path = Path(path)
