@@ -7,7 +7,8 @@ distance d and reward exp(w_d d^2) between the run's demonstration and:
 
 - nuisance changes of the SAME motion, rendered here: the robot shifted along x by a
   fraction of a ground-checker square (the follow camera then sees the ground pattern
-  at another phase), the camera turned or moved back a little;
+  at another phase; on the default plain ground these rows measure d ~0 by construction),
+  the camera turned or moved back a little;
 - a good imitation done with physics: the simulated robot (no randomisation) following the
   reference with ``virl_quad.demo.tracker`` (ground-truth score about 0.7, 1.6x standing);
 - real motion differences: the robot standing in its default pose (simulated, no

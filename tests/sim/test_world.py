@@ -56,3 +56,22 @@ def test_camera_frames_and_ghost_one_at_a_time() -> None:
         assert rgb.shape == (96, 96, 3)
         with pytest.raises(ValueError, match="unknown body"):
             w.render(body="other")
+
+
+def test_ground_choices_render_differently_and_unknown_is_refused() -> None:
+    import numpy as np
+    import pytest
+
+    from virl_quad import robots
+    from virl_quad.sim.world import World
+
+    spec = robots.get("pupper")
+    with World(spec) as w:                     # default: plain gray ground
+        plain = w.render().astype(int)
+    with World(spec, ground="checker") as w:
+        checker = w.render().astype(int)
+    assert np.abs(plain - checker).mean() > 5.0
+    lower = plain[40:]                          # bottom rows: ground only
+    assert lower.std() < 2.0 and checker[40:].std() > 10.0
+    with pytest.raises(ValueError, match="unknown ground"):
+        World(spec, ground="grass")

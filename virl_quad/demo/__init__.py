@@ -33,7 +33,7 @@ _LAZY = {
 }
 
 #: Bump when gait parameters or rendering change, so cached renders are rebuilt.
-CACHE_VERSION = "gaits-v1"
+CACHE_VERSION = "gaits-v2"   # v2: plain ground
 MOTION_SUFFIXES = (".txt", ".json")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v")
 

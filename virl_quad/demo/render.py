@@ -159,8 +159,10 @@ def render_demonstration(motion: Motion, robot: str, source: str = "", min_secon
 def ground_shifted(demo: Demonstration, robot: str, n: int) -> list[np.ndarray]:
     """The demonstration's frames re-rendered with the robot k/(n+1) of the ground pattern's
     period (two checker squares) further along, k = 1..n: the same motion where the follow
-    camera sees the ground at another phase (positives for a distance model). Empty when
-    the demonstration has no motion or a re-render comes out at another length."""
+    camera sees the ground at another phase (positives for a distance model). Of use on a
+    textured ground only: on the renderer's default plain ground they equal the
+    demonstration. Empty when the demonstration has no motion or a re-render comes out
+    at another length."""
     from virl_quad.sim.world import CHECKER_SQUARE
 
     if n <= 0 or demo.motion is None:
