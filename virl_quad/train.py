@@ -62,13 +62,33 @@ def _load_demo(args: TrainArgs, run_dir: Path):
 
     saved = run_dir / "demo.npz"
     if saved.exists():
-        return demo_lib.load(str(saved), args.robot)
+        d = demo_lib.load(str(saved), args.robot)
+        if args.reward != "oracle":
+            _check_same_rendering(d, args)
+        return d
     d = demo_lib.load(args.demo, args.robot)
     run_dir.mkdir(parents=True, exist_ok=True)
     from virl_quad.demo.render import save_npz
 
     save_npz(d, saved)
     return d
+
+
+def _check_same_rendering(saved, args: TrainArgs) -> None:
+    """UserError if the run's saved demonstration frames differ from what the renderer makes of
+    its source now (another ground or camera since the run began): the agent's frames would
+    then come from another renderer than the expert's, and the learned reward would be wrong."""
+    from virl_quad import demo as demo_lib
+
+    if saved.motion is None:
+        return                                   # an imported video: nothing rendered to compare
+    try:
+        now = demo_lib.load(args.demo, args.robot)
+    except (ValueError, FileNotFoundError, OSError):
+        return                                   # the source is not here: trust the saved frames
+    if now.frames.shape != saved.frames.shape or np.abs(now.frames.astype(np.int16) - saved.frames).mean() > 1.0:
+        raise UserError(f"the run's demonstration frames differ from what this version renders for {args.demo!r} "
+                        f"(the renderer changed, e.g. its ground): train a new run")
 
 
 def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:

@@ -48,6 +48,16 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     assert policy.spec.name == robot and policy.meta["iterations"] == 3
     action = policy.act(np.zeros(policy.meta["observation"]["size"], np.float32))
     assert action.shape == (12,) and np.all(np.isfinite(action))
+    # a run whose demonstration was rendered otherwise (an older renderer) is not resumed
+    import dataclasses
+
+    from virl_quad import demo as demo_lib
+    from virl_quad.demo.render import save_npz
+
+    saved = demo_lib.load(str(run_dir / "demo.npz"), robot)
+    save_npz(dataclasses.replace(saved, frames=255 - saved.frames), run_dir / "demo.npz")
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "4")
+    assert p.returncode == 2 and "renders" in p.stderr and "Traceback" not in p.stderr, p.stderr[-2000:]
 
 
 def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
