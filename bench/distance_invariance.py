@@ -34,6 +34,7 @@ from virl_quad import envs, robots
 from virl_quad.demo.render import render_demonstration
 from virl_quad.demo.tracker import tracker_action
 from virl_quad.sim.camera import CameraParams
+from virl_quad.sim.params import DEFAULT_GROUND
 from virl_quad.training import checkpoint
 
 SQUARE = 0.125  # m, side of a ground-checker square (16 per 2 m texture tile, sim/world.py)
@@ -75,7 +76,8 @@ def main() -> None:
         print(f"{name:<44}{d.mean():8.3f}{np.exp(w_d * d ** 2).mean():10.4f}")
 
     def render(motion=None, cam=None) -> np.ndarray:
-        return render_demonstration(motion or demo.motion, robot, cam=cam).frames[idx]
+        return render_demonstration(motion or demo.motion, robot, cam=cam,
+                                    ground=demo.camera.get("ground", DEFAULT_GROUND)).frames[idx]
 
     print(f"run {a.run_dir}: {robot}, {demo.source}, w_d {w_d:g}; mean over frames 10..{n - 1}")
     print(f"{'demonstration vs':<44}{'d':>8}{'reward':>10}")

@@ -39,6 +39,7 @@ from virl_quad.demo.render import ground_shifted
 from virl_quad.demo.score import Trajectory, score_trajectory
 from virl_quad.demo.tracker import tracker_action
 from virl_quad.reward.config import RewardConfig
+from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 from virl_quad.reward.reward import build_reward
 from virl_quad.training import checkpoint
 
@@ -60,9 +61,9 @@ def controllers(robot: str, cycle: float) -> dict[str, object]:
     return out
 
 
-def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool):
+def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool, ground: str):
     """(agent frames, expert frames, ground-truth total) of one episode."""
-    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds)
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
     u, rng = env.unwrapped, np.random.default_rng(seed)
     obs, _ = env.reset(seed=seed)
     agent, expert, rows, feet, times = [], [], [], [], []
@@ -89,17 +90,18 @@ def fresh_model(a: argparse.Namespace):
     from virl_quad.demo.gaits import GAIT_NAMES
 
     robot, gait = a.robot, a.demo
-    demo = demo_lib.load(gait, robot)
-    clips = [demo_lib.load(g, robot).frames for g in GAIT_NAMES if g != gait]
+    demo = demo_lib.load(gait, robot, ground=a.ground)
+    clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
     cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
-    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", ground_shifted(demo, robot, a.ground_shifts))
+    shifts = ground_shifted(demo, robot, a.ground_shifts) if a.ground == "checker" else []
+    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", shifts)
     for name, act in controllers(robot, float(demo.motion.duration)).items():
         for seed in range(1000, 1000 + a.train_seeds):
-            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize)
+            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)
             rm.add_episode(agent, expert)
-    print(f"training a fresh {a.variant} model: {a.updates} updates, adversarial weight "
-          f"{a.adversarial_weight:g}, {a.ground_shifts} ground shifts", file=sys.stderr, flush=True)
+    print(f"training a fresh {a.variant} model on the {a.ground} ground: {a.updates} updates, adversarial "
+          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts", file=sys.stderr, flush=True)
     for k in range(0, a.updates, 100):
         info = rm.update(min(100, a.updates - k))
         print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
@@ -118,13 +120,16 @@ def main() -> int:
     p.add_argument("--demo", default="trot", help="--fresh: built-in gait to imitate")
     p.add_argument("--variant", default="virl", help="--fresh: reward variant (virl, frame, sequence, no_ae)")
     p.add_argument("--adversarial-weight", type=float, default=1.0, help="--fresh: expert-vs-agent pair weight")
-    p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders")
+    p.add_argument("--ground", choices=GROUNDS, help="ground of the renders (default: the run's demonstration's, "
+                   "else checker; give it for a run whose demonstration does not record it)")
+    p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders (checker only)")
     p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
     p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
     p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")
     a = p.parse_args()
     torch.set_num_threads(1)
     if a.fresh:
+        a.ground = a.ground or DEFAULT_GROUND
         rm, demo, robot = fresh_model(a)
     elif a.run_dir is None:
         raise SystemExit("error: give a RUN_DIR or --fresh")
@@ -133,13 +138,14 @@ def main() -> int:
             rm, demo, _, robot = checkpoint.load_reward_model(a.run_dir)
         except ValueError as e:
             raise SystemExit(f"error: {e}") from None
+        a.ground = a.ground or demo.camera.get("ground") or DEFAULT_GROUND
     if demo.motion is None:
         raise SystemExit("error: the run's demonstration has no reference motion (the score needs one)")
     rows, rewards, scores = [], [], []
     for name, act in controllers(robot, float(demo.motion.duration)).items():
         r_, s_ = [], []
         for seed in range(a.seeds):
-            agent, expert, score = rollout(robot, demo, act, seed, a.seconds, not a.no_randomize)
+            agent, expert, score = rollout(robot, demo, act, seed, a.seconds, not a.no_randomize, a.ground)
             with torch.no_grad():
                 d = rm.distance(torch.from_numpy(expert[:, None]), torch.from_numpy(agent[:, None]))[SKIP:, 0]
             r_.append(float(torch.exp(rm.cfg.w_d * d ** 2).mean()))
@@ -149,6 +155,7 @@ def main() -> int:
         scores += s_
         print(f"  {name:<30} reward {rows[-1][1]:.3f}  score {rows[-1][2]:.3f}", file=sys.stderr, flush=True)
     what = f"a fresh {a.variant} model (adversarial {a.adversarial_weight:g})" if a.fresh else f"run {a.run_dir}"
+    what += f", {a.ground} ground"
     print(f"{what}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
           f"randomisation {'off' if a.no_randomize else 'on'}")
     print(f"{'controller':<32}{'reward':>8}{'score':>8}")

@@ -66,7 +66,7 @@ def _load_demo(args: TrainArgs, run_dir: Path):
         if args.reward != "oracle":
             _check_same_rendering(d, args)
         return d
-    d = demo_lib.load(args.demo, args.robot)
+    d = demo_lib.load(args.demo, args.robot, ground=args.ground)
     run_dir.mkdir(parents=True, exist_ok=True)
     from virl_quad.demo.render import save_npz
 
@@ -83,7 +83,7 @@ def _check_same_rendering(saved, args: TrainArgs) -> None:
     if saved.motion is None:
         return                                   # an imported video: nothing rendered to compare
     try:
-        now = demo_lib.load(args.demo, args.robot)
+        now = demo_lib.load(args.demo, args.robot, ground=args.ground)
     except (ValueError, FileNotFoundError, OSError):
         return                                   # the source is not here: trust the saved frames
     if now.frames.shape != saved.frames.shape or np.abs(now.frames.astype(np.int16) - saved.frames).mean() > 1.0:
@@ -108,7 +108,7 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
         sources = []
     else:
         sources = [s.strip() for s in choice.split(",") if s.strip()]
-    clips = [demo_lib.load(s, args.robot).frames for s in sources]
+    clips = [demo_lib.load(s, args.robot, ground=args.ground).frames for s in sources]
     run_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(saved, **{f"clip{i:02d}": c for i, c in enumerate(clips)})
     if sources:
@@ -118,7 +118,7 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
 
 def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     """Ground-shift positives for the distance model (see render.ground_shifted)."""
-    if args.ground_shifts == 0 or demo.motion is None:
+    if args.ground_shifts == 0 or demo.motion is None or args.ground != "checker":
         return []
     from virl_quad.demo.render import ground_shifted
 
@@ -147,7 +147,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
-                          oracle_reward=oracle)
+                          oracle_reward=oracle, ground=args.ground)
     source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
                                                       lr=args.reward_lr, cyclic=demo.loop,
@@ -158,7 +158,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                        episode_seconds=args.eval_seconds, randomize=args.randomize)
+                        episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground)
 
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args), evaluate=evaluator,
                         device=args.device)
@@ -208,14 +208,14 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
     print("final evaluation ...", flush=True)
     policy = actor_policy(runner.alg.get_policy().eval())
     final = evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                     episode_seconds=args.eval_seconds, randomize=args.randomize)
+                     episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground)
     report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
               "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final}
     write_report(run_dir / "report.json", report)
     print(f"report: {run_dir / 'report.json'} (score {final.get('total', float('nan')):.3f}, "
           f"survival {final.get('survival_fraction', float('nan')):.2f})", flush=True)
     if args.video:
-        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4")
+        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground)
         print(f"video: {out}", flush=True)
 
 

@@ -21,7 +21,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 def test_builtin_gait_is_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("VIRL_QUAD_CACHE", str(tmp_path))
     d = demo.load("trot", "pupper")
-    (cached,) = tmp_path.glob(f"pupper_trot_{demo.CACHE_VERSION}_*.npz")
+    (cached,) = tmp_path.glob(f"pupper_trot_checker_{demo.CACHE_VERSION}_*.npz")
     assert d.motion is not None and d.fps == 50.0
     t = time.perf_counter()
     again = demo.load("trot", "pupper")
@@ -30,6 +30,9 @@ def test_builtin_gait_is_cached(tmp_path, monkeypatch):
     assert again.motion is not None and again.source == "gait:trot"
     cached.write_bytes(b"corrupt")                       # a broken cache entry is rendered again
     assert demo.load("trot", "pupper").num_frames == d.num_frames
+    plain = demo.load("trot", "pupper", ground="plain")  # another ground: another entry
+    assert len(list(tmp_path.glob(f"pupper_trot_plain_{demo.CACHE_VERSION}_*.npz"))) == 1
+    assert plain.camera["ground"] == "plain" and np.abs(plain.frames.astype(int) - d.frames).mean() > 5
 
 
 def test_cache_dir_default(monkeypatch, tmp_path):

@@ -133,3 +133,16 @@ def test_targets_move_at_most_the_safety_layers_step() -> None:
     free.step(jump)
     np.testing.assert_allclose(free.unwrapped.last_target, want)
     free.close()
+
+
+def test_env_draws_the_demonstration_ground_and_refuses_another() -> None:
+    from virl_quad import demo as demo_lib
+
+    plain = demo_lib.load("trot", "pupper", ground="plain")
+    assert plain.camera["ground"] == "plain"
+    env = make("pupper", demo=plain, randomize=False)            # follows the demonstration
+    obs, _ = env.reset(seed=0, options={"demo_step": 0})
+    assert obs["agent_image"][40:].std() < 2.0                    # bottom rows: uniform ground
+    env.close()
+    with pytest.raises(ValueError, match="ground"):
+        make("pupper", demo=plain, ground="checker")

@@ -66,7 +66,7 @@ def test_ground_choices_render_differently_and_unknown_is_refused() -> None:
     from virl_quad.sim.world import World
 
     spec = robots.get("pupper")
-    with World(spec) as w:                     # default: plain gray ground
+    with World(spec, ground="plain") as w:
         plain = w.render().astype(int)
     with World(spec, ground="checker") as w:
         checker = w.render().astype(int)

@@ -57,9 +57,15 @@ def test_ground_shift_renders_match_the_demo() -> None:
     d = demo_lib.load("trot", "pupper")
     variants = _ground_shifts(TrainArgs(ground_shifts=2), d)
     assert len(variants) == 2 and all(v.shape == d.frames.shape for v in variants)
-    # the robot is the same, only the ground moved, and the default ground is plain:
-    # the camera sees no difference (the ground pattern's phase is gone from the frames)
-    assert all(np.abs(v.astype(int) - d.frames).mean() < 0.5 for v in variants)
+    # the robot is the same, only the ground moved: the frames differ, the demo is untouched
+    assert all(np.abs(v.astype(int) - d.frames).mean() > 1.0 for v in variants)
+    # on the plain ground a shift changes nothing the camera sees, and no shifts are made
+    plain = demo_lib.load("trot", "pupper", ground="plain")
+    assert _ground_shifts(TrainArgs(ground="plain", ground_shifts=2), plain) == []
+    from virl_quad.demo.render import ground_shifted
+    assert all(np.abs(v.astype(int) - plain.frames).mean() < 0.5 for v in ground_shifted(plain, "pupper", 2))
+    with pytest.raises(ValueError, match="ground"):
+        validate(TrainArgs(ground="grass"))
     assert _ground_shifts(TrainArgs(ground_shifts=0), d) == []
     no_motion = Demonstration(frames=d.frames, fps=d.fps, robot="pupper", source="video", camera=d.camera,
                               motion=None, loop=True, displacement=None)

@@ -23,6 +23,7 @@ import numpy as np
 
 from virl_quad import robots
 from virl_quad.demo.demonstration import Demonstration, MotionLike, MotionState
+from virl_quad.sim.params import DEFAULT_GROUND
 
 # The heavier modules (scipy, OpenCV, PyBullet, Pinocchio) load on first use: the environment
 # imports this package for the Demonstration class alone.
@@ -33,7 +34,7 @@ _LAZY = {
 }
 
 #: Bump when gait parameters or rendering change, so cached renders are rebuilt.
-CACHE_VERSION = "gaits-v2"   # v2: plain ground
+CACHE_VERSION = "gaits-v2"   # v2: the ground is recorded in the demonstration
 MOTION_SUFFIXES = (".txt", ".json")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v")
 
@@ -81,18 +82,18 @@ def _cache_key(robot: str, gait: str) -> str:
     return h.hexdigest()[:10]
 
 
-def gait_demonstration(gait: str, robot: str, use_cache: bool = True) -> Demonstration:
-    """The rendered demonstration of built-in ``gait`` on ``robot``, cached under :func:`cache_dir`."""
+def gait_demonstration(gait: str, robot: str, use_cache: bool = True, ground: str = DEFAULT_GROUND) -> Demonstration:
+    """The rendered demonstration of built-in ``gait`` on ``robot`` and ``ground``, cached under :func:`cache_dir`."""
     from virl_quad.demo.gaits import gait_motion
     from virl_quad.demo.render import load_npz, render_demonstration, save_npz
 
-    path = cache_dir() / f"{robot}_{gait}_{CACHE_VERSION}_{_cache_key(robot, gait)}.npz"
+    path = cache_dir() / f"{robot}_{gait}_{ground}_{CACHE_VERSION}_{_cache_key(robot, gait)}.npz"
     if use_cache and path.is_file():
         try:
             return load_npz(path)
         except (ValueError, KeyError, OSError):
             pass  # corrupt cache entry: render again
-    d = render_demonstration(gait_motion(robot, gait), robot, source=f"gait:{gait}")
+    d = render_demonstration(gait_motion(robot, gait), robot, source=f"gait:{gait}", ground=ground)
     if use_cache:
         try:
             save_npz(d, path)
@@ -101,14 +102,14 @@ def gait_demonstration(gait: str, robot: str, use_cache: bool = True) -> Demonst
     return d
 
 
-def motion_demonstration(motion: Motion, robot: str, source: str = "") -> Demonstration:
+def motion_demonstration(motion: Motion, robot: str, source: str = "", ground: str = DEFAULT_GROUND) -> Demonstration:
     """Render a motion on ``robot``, retargeting it first when it belongs to another robot."""
     from virl_quad.demo.render import render_demonstration
     from virl_quad.demo.retarget import retarget
 
     if motion.robot and motion.robot != robot:
         motion = retarget(motion, robot)
-    return render_demonstration(motion, robot, source=source or motion.name)
+    return render_demonstration(motion, robot, source=source or motion.name, ground=ground)
 
 
 def _for_robot(d: Demonstration, robot: str) -> Demonstration:
@@ -126,12 +127,13 @@ def _for_robot(d: Demonstration, robot: str) -> Demonstration:
                          motion=None, loop=d.loop, displacement=None)
 
 
-def load(source: str | os.PathLike, robot: str) -> Demonstration:
+def load(source: str | os.PathLike, robot: str, ground: str = DEFAULT_GROUND) -> Demonstration:
     """A demonstration for ``robot`` from ``source``.
 
     ``source``: a built-in gait name (rendered, cached), a ``.npz`` saved by ``save_npz``, a motion
     file (``.txt``/``.json`` motion_imitation clip or the Laikago recording; rendered, retargeted to
-    Pupper when needed) or a video file (imported). Raises FileNotFoundError for a missing file and a
+    Pupper when needed) or a video file (imported). Renders are made on ``ground`` ("checker" or
+    "plain"; a ``.npz`` or a video is what it is). Raises FileNotFoundError for a missing file and a
     one-line ValueError for anything else that cannot be used (naming the valid gait names).
     """
     from virl_quad.demo.gaits import GAIT_NAMES
@@ -141,7 +143,7 @@ def load(source: str | os.PathLike, robot: str) -> Demonstration:
     text = str(source)
     name = text.removeprefix("gait:")  # renders of built-in gaits are labelled "gait:<name>"
     if name in GAIT_NAMES:
-        return gait_demonstration(name, robot)
+        return gait_demonstration(name, robot, ground=ground)
     path = Path(text)
     suffix = path.suffix.lower()
     if suffix not in (".npz",) + MOTION_SUFFIXES + VIDEO_SUFFIXES:
@@ -153,7 +155,7 @@ def load(source: str | os.PathLike, robot: str) -> Demonstration:
     if suffix in MOTION_SUFFIXES:
         from virl_quad.demo.motion_io import read_motion
 
-        return motion_demonstration(read_motion(path), robot, source=str(path))
+        return motion_demonstration(read_motion(path), robot, source=str(path), ground=ground)
     from virl_quad.demo.video_import import import_video
 
     return import_video(path, robot)

@@ -26,6 +26,7 @@ from virl_quad import robots
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.demo.motion import Motion, heading
 from virl_quad.sim.camera import FRAME_SIZE, CameraParams
+from virl_quad.sim.params import DEFAULT_GROUND
 
 PREVIEW_SIZE = 256   # px, side of the RGB preview video
 PREVIEWS = ("render", "frames")  # preview video: a larger render, or the 48 px frames enlarged 5x
@@ -59,8 +60,10 @@ def frame_count(motion: Motion, fps: float, min_seconds: float = 2.0) -> int:
 
 def render_motion(motion: Motion, robot: str, num_frames: int, fps: float | None = None,
                   cam: CameraParams | None = None, preview_size: int = 0,
-                  fixed_target: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """Render ``num_frames`` frames of ``motion`` at ``fps`` (default: the control rate) from t = 0.
+                  fixed_target: np.ndarray | None = None,
+                  ground: str = DEFAULT_GROUND) -> tuple[np.ndarray, np.ndarray | None]:
+    """Render ``num_frames`` frames of ``motion`` at ``fps`` (default: the control rate) from t = 0,
+    on the ``ground`` ("checker" or "plain").
 
     Returns gray frames (T, 48, 48) uint8 and, when ``preview_size`` > 0, RGB frames (T, S, S, 3) uint8.
     Joint angles are clipped to the robot's limits, as the environment does. ``fixed_target`` (m, world):
@@ -74,7 +77,7 @@ def render_motion(motion: Motion, robot: str, num_frames: int, fps: float | None
     cam = cam or CameraParams.from_spec(spec)
     gray = np.empty((num_frames, FRAME_SIZE, FRAME_SIZE), np.uint8)
     rgb = np.empty((num_frames, preview_size, preview_size, 3), np.uint8) if preview_size else None
-    world = World(spec)
+    world = World(spec, ground=ground)
     try:
         for i in range(num_frames):
             pos, quat, q = motion.pose_at(i / fps)
@@ -131,8 +134,10 @@ def enlarge(frames: np.ndarray, factor: int = 5) -> np.ndarray:
 
 def render_demonstration(motion: Motion, robot: str, source: str = "", min_seconds: float = 2.0,
                          video: str | os.PathLike | None = None, preview_size: int = PREVIEW_SIZE,
-                         cam: CameraParams | None = None, preview: str = "frames") -> Demonstration:
-    """Render ``motion`` (of ``robot``) into a :class:`Demonstration` at the control rate.
+                         cam: CameraParams | None = None, preview: str = "frames",
+                         ground: str = DEFAULT_GROUND) -> Demonstration:
+    """Render ``motion`` (of ``robot``) into a :class:`Demonstration` at the control rate, on
+    the ``ground`` ("checker" or "plain"; recorded as ``camera["ground"]``).
 
     ``video``: also write an ``.mp4`` there: ``preview="render"`` a larger RGB render
     (``preview_size`` px square, same camera); ``preview="frames"`` the 48x48 frames themselves,
@@ -148,11 +153,11 @@ def render_demonstration(motion: Motion, robot: str, source: str = "", min_secon
     motion = fit_loop(motion, fps)
     n = frame_count(motion, fps, min_seconds)
     big = preview_size if (video is not None and preview == "render") else 0
-    gray, rgb = render_motion(motion, robot, n, fps, cam, big)
+    gray, rgb = render_motion(motion, robot, n, fps, cam, big, ground=ground)
     if video is not None:
         write_mp4(rgb if preview == "render" else enlarge(gray), fps, video)
     return Demonstration(frames=gray, fps=fps, robot=robot, source=source or motion.name,
-                         camera=dataclasses.asdict(cam), motion=motion, loop=motion.loop,
+                         camera={**dataclasses.asdict(cam), "ground": ground}, motion=motion, loop=motion.loop,
                          displacement=root_displacement(motion, n, fps))
 
 
@@ -171,7 +176,7 @@ def ground_shifted(demo: Demonstration, robot: str, n: int) -> list[np.ndarray]:
     out = []
     for k in range(1, n + 1):
         shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
-        frames = render_demonstration(shifted, robot).frames
+        frames = render_demonstration(shifted, robot, ground=demo.camera.get("ground", DEFAULT_GROUND)).frames
         if frames.shape != demo.frames.shape:
             return []
         out.append(frames)

@@ -26,6 +26,7 @@ from virl_quad.envs.randomize import DRConfig, Randomization, sample
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
 from virl_quad.sim.params import PhysicsParams
+from virl_quad.sim.params import DEFAULT_GROUND
 from virl_quad.sim.world import RobotState, World
 
 # Nominal measurement noise std (x the episode's obs_noise draw), as legged_gym.
@@ -49,6 +50,8 @@ class EnvConfig:
     randomize: bool = True                 # domain randomisation on/off
     randomization: dict | None = None      # per-parameter range overrides, see DRConfig
     render: bool = True                    # produce agent_image (off: a blank frame, faster)
+    ground: str | None = None              # what the camera sees of the ground, "checker" or "plain";
+                                           # None: the demonstration's, else DEFAULT_GROUND
     demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     terminate_on_fall: bool = True         # end the episode when the robot falls
@@ -66,6 +69,16 @@ def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:
     return dataclasses.replace(spec, sim_dt=dt, substeps=n) if (dt, n) != (spec.sim_dt, spec.substeps) else spec
 
 
+def _ground(cfg: EnvConfig) -> str:
+    """The ground to draw: the config's, else the demonstration's, else the default; ValueError
+    when the config and the demonstration disagree (the frames would differ in more than motion)."""
+    demo_ground = (cfg.demo.camera or {}).get("ground") if cfg.demo is not None else None
+    if cfg.ground is not None and demo_ground is not None and demo_ground != cfg.ground:
+        raise ValueError(f"the demonstration was rendered on the {demo_ground!r} ground, the env would draw "
+                         f"{cfg.ground!r}: agent and expert frames would differ in more than the motion")
+    return cfg.ground or demo_ground or DEFAULT_GROUND
+
+
 class QuadrupedEnv(gym.Env):
     """One robot, one episode at a time. Build it with ``virl_quad.envs.make``."""
 
@@ -76,7 +89,7 @@ class QuadrupedEnv(gym.Env):
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
-        self.world = World(spec)
+        self.world = World(spec, ground=_ground(cfg))
         self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig() if cfg.randomize else DRConfig.off())
         self.demo = cfg.demo
         if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:

@@ -39,3 +39,13 @@ class PhysicsParams:
     def vector_size() -> int:
         """Length of :meth:`as_vector`."""
         return 9 + 12
+
+
+GROUNDS = ("plain", "checker")
+#: What the camera sees of the ground; physics is the same on both. The checker (default)
+#: shows forward progress in the frames of a follow camera, but at a phase set by the
+#: robot's absolute position, which a learned distance can end up measuring instead of the
+#: legs. On the plain gray ground that confound is gone and so is the visible progress
+#: (bench/reward_alignment.py --fresh: rank correlation of reward and ground-truth score
+#: +0.83 on the plain ground, -0.04..+0.32 on the checker).
+DEFAULT_GROUND = "checker"

@@ -20,7 +20,7 @@ from pybullet_utils.bullet_client import BulletClient
 from virl_quad.quiet import quiet_fd
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.sim import camera
-from virl_quad.sim.params import PhysicsParams
+from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS, PhysicsParams  # noqa: F401 (re-exported)
 from virl_quad.sim.pd import pd_torque
 
 GRAVITY = 9.81  # m/s²
@@ -47,13 +47,7 @@ class RobotState:
 
 
 CHECKER_SQUARE = 0.125  # m: side of a square of the "checker" ground (16 per 2 m texture tile)
-GROUNDS = ("plain", "checker")
-#: What the camera sees of the ground. "plain" (uniform gray) by default: on the checker, a
-#: follow camera sees the pattern at a phase set by the robot's absolute position, and the
-#: learned distance measured that instead of the legs (bench/reward_alignment.py: rank
-#: correlation of reward and ground-truth score 0.83 on the plain ground, -0.04..0.32 on the
-#: checker). Physics is the same on both.
-DEFAULT_GROUND = "plain"
+
 
 
 def _ground_texture(ground: str) -> str:

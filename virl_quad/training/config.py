@@ -38,7 +38,8 @@ class TrainArgs:
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
-    ground_shifts: int = 0             # re-renders of the demonstration with the robot shifted along the ground, as positive pairs that teach the distance model to ignore the ground pattern's phase (needs a reference motion; 0: off; only of use on a textured ground, and the renderer's ground is plain)
+    ground: str = field(default="checker", metadata={"choices": ("checker", "plain")})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
+    ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
     entropy_coef: float = 0.005        # PPO entropy bonus
@@ -59,6 +60,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
+    if args.ground not in ("checker", "plain"):
+        raise ValueError(f"unknown --ground {args.ground!r}; choose checker or plain")
     if args.ground_shifts < 0:
         raise ValueError(f"--ground-shifts must be >= 0, got {args.ground_shifts}")
     if args.adversarial_weight < 0:
