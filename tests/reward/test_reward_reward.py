@@ -128,6 +128,13 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
     fresh = RewardModel.load(path)                                # the saved state, not updated since
     assert torch.equal(fresh.recompute(agent, expert, dones, s), reweighted.recompute(agent, expert, dones, s))
     assert reweighted.cfg.pair_weights == {"expert_vs_agent": 0.0}
+    # so may w_d: the same distances, another reward shape (exp(-1 d^2) = exp(-5 d^2) ** 0.2)
+    if variant != "gaifo":
+        softer = make(variant, RewardConfig(**{**small_cfg.to_dict(), "w_d": small_cfg.w_d / 5}), demo, other,
+                      agent_episode)
+        softer.load_state_dict(torch.load(path, weights_only=True))
+        torch.testing.assert_close(softer.recompute(agent, expert, dones, s),
+                                   fresh.recompute(agent, expert, dones, s) ** 0.2)
 
 
 def test_bad_inputs_raise_one_line_value_errors(trained_rm):

@@ -40,6 +40,8 @@ from virl_quad.reward.trainer import Trainer
 
 FORMAT = "virl_quad.reward/1"
 _CHUNK = 512  # frames per encoder call in batch recomputation (cache-sized: faster per frame)
+#: RewardConfig fields a resumed run may change: they shape training or the reward, not the model.
+RESUME_MAY_CHANGE = ("pair_weights", "w_d")
 
 
 @dataclass(frozen=True)
@@ -215,11 +217,12 @@ class RewardModel:
 
     def load_state_dict(self, d: dict) -> None:
         """Restore network, optimiser and RNG states saved by a model with the same config
-        (the pair-sampling weights aside: a resumed run may draw pairs differently)."""
+        (:data:`RESUME_MAY_CHANGE` aside: a resumed run may draw pairs or shape the reward differently)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
         saved, mine = dict(d["config"]), self.cfg.to_dict()
-        saved.pop("pair_weights", None), mine.pop("pair_weights")   # how pairs are drawn may change on resume
+        for key in RESUME_MAY_CHANGE:                 # how pairs are drawn and d becomes a reward
+            saved.pop(key, None), mine.pop(key, None)
         if saved != mine:
             raise ValueError("state was saved with a different RewardConfig")
         self.net.load_state_dict(d["net"])
