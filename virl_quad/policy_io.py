@@ -71,9 +71,13 @@ class NumpyMLP:
         h = x
         last = len(self.layers) - 1
         for i, (w, b) in enumerate(self.layers):
-            h = h @ w + b
-            if i < last:
-                h = np.maximum(h, 0) + np.expm1(np.minimum(h, 0))   # ELU, alpha 1
+            h = h @ w
+            h += b                                   # in place: one temporary array fewer per layer
+            if i < last:                             # ELU (alpha 1): max(h, 0) + expm1(min(h, 0))
+                neg = np.minimum(h, 0)
+                np.expm1(neg, out=neg)
+                np.maximum(h, 0, out=h)
+                h += neg
         return h
 
 
