@@ -25,8 +25,7 @@ from virl_quad.envs import observation as obs_lib
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
-from virl_quad.sim.params import PhysicsParams
-from virl_quad.sim.params import DEFAULT_GROUND
+from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
 from virl_quad.sim.world import RobotState, World
 
 # Nominal measurement noise std (x the episode's obs_noise draw), as legged_gym.

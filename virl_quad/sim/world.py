@@ -49,7 +49,6 @@ class RobotState:
 CHECKER_SQUARE = 0.125  # m: side of a square of the "checker" ground (16 per 2 m texture tile)
 
 
-
 def _ground_texture(ground: str) -> str:
     """Path of the ground texture image (made once, cached in the temp folder)."""
     if ground not in GROUNDS:
