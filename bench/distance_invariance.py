@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.demo.render import render_demonstration
 from virl_quad.demo.tracker import tracker_action

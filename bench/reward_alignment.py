@@ -36,7 +36,7 @@ from scipy.stats import spearmanr
 from virl_quad import demo as demo_lib
 from virl_quad import envs
 from virl_quad.demo.render import ground_shifted
-from virl_quad.demo.score import Trajectory, score_trajectory
+from virl_quad.demo.score import record_episode, score_trajectory
 from virl_quad.demo.tracker import tracker_action
 from virl_quad.reward.config import RewardConfig
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
@@ -64,24 +64,21 @@ def controllers(robot: str, cycle: float) -> dict[str, object]:
 def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool, ground: str):
     """(agent frames, expert frames, ground-truth total) of one episode."""
     env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
-    u, rng = env.unwrapped, np.random.default_rng(seed)
-    obs, _ = env.reset(seed=seed)
-    agent, expert, rows, feet, times = [], [], [], [], []
+    rng = np.random.default_rng(seed)
+    agent, expert = [], []
+
+    def policy(obs: dict) -> np.ndarray:
+        """The controller's action; keeps the frames the reward would see at this step."""
+        agent.append(obs["agent_image"])
+        expert.append(obs["expert_image"])
+        return act(env, rng)
+
     try:
-        while True:
-            s = u.state
-            agent.append(obs["agent_image"])
-            expert.append(obs["expert_image"])
-            rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
-            feet.append(u.world.foot_positions())
-            times.append(u.demo_step / demo.fps)
-            obs, _, fell, truncated, _ = env.step(act(env, rng))
-            if fell or truncated:
-                break
+        obs, _ = env.reset(seed=seed)
+        traj, times, _ = record_episode(env, policy, obs)
     finally:
         env.close()
-    cols = [np.array(c) for c in zip(*rows)]
-    score = score_trajectory(Trajectory(*cols, feet=np.array(feet)), demo.motion, np.array(times), robot)["total"]
+    score = score_trajectory(traj, demo.motion, times, robot)["total"]
     return np.array(agent), np.array(expert), float(score)
 
 
@@ -94,7 +91,7 @@ def fresh_model(a: argparse.Namespace):
     clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
     cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
-    shifts = ground_shifted(demo, robot, a.ground_shifts) if a.ground == "checker" else []
+    shifts = ground_shifted(demo, robot, a.ground_shifts, a.ground)
     rm = build_reward(cfg, demo.frames, clips, 0, "cpu", shifts)
     for name, act in controllers(robot, float(demo.motion.duration)).items():
         for seed in range(1000, 1000 + a.train_seeds):

@@ -27,7 +27,7 @@ import numpy as np
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
-from virl_quad.demo.score import TERMS, Trajectory, score_trajectory
+from virl_quad.demo.score import TERMS, record_episode, score_trajectory
 from virl_quad.demo.tracker import DEFAULT_LEAD, tracker_action
 from virl_quad.kinematics import Kinematics
 
@@ -37,28 +37,20 @@ def run(robot: str, demo, gain: float | None, lead: float, episodes: int, random
     spec = robots.get(robot)
     m, kin = demo.motion, Kinematics(spec)
     env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=10.0)
-    u = env.unwrapped
     out: dict[str, list[float]] = {k: [] for k in (*TERMS, "total", "survival", "travel", "ref_travel")}
+
+    def policy(obs: dict) -> np.ndarray:
+        return np.zeros(len(spec.joint_names)) if gain is None else tracker_action(env, gain, lead)
+
     try:
         for ep in range(episodes):
-            env.reset(seed=ep)
-            rows, feet, times = [], [], []
-            fell = False
-            while True:
-                s = u.state
-                rows.append((s.base_pos, s.base_quat, s.q, s.dq, s.base_lin_vel, s.base_ang_vel))
-                feet.append(u.world.foot_positions())
-                times.append(u.demo_step / demo.fps)
-                action = np.zeros(len(spec.joint_names)) if gain is None else tracker_action(env, gain, lead)
-                _, _, fell, truncated, _ = env.step(action)
-                if fell or truncated:
-                    break
-            cols = [np.array(c) for c in zip(*rows)]
-            res = score_trajectory(Trajectory(*cols, feet=np.array(feet)), m, np.array(times), robot, kin=kin)
+            obs, _ = env.reset(seed=ep)
+            traj, times, fell = record_episode(env, policy, obs)
+            res = score_trajectory(traj, m, times, robot, kin=kin)
             for k in (*TERMS, "total"):
                 out[k].append(res[k])
             out["survival"].append(0.0 if fell else 1.0)
-            out["travel"].append(float(cols[0][-1, 0] - cols[0][0, 0]))
+            out["travel"].append(float(traj.root_pos[-1, 0] - traj.root_pos[0, 0]))
             out["ref_travel"].append(float(m.state_at(times[-1]).root_pos[0] - m.state_at(times[0]).root_pos[0]))
     finally:
         env.close()

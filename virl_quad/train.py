@@ -118,16 +118,15 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
 
 def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     """Ground-shift positives for the distance model (see render.ground_shifted)."""
-    if args.ground_shifts == 0 or demo.motion is None or args.ground != "checker":
-        return []
     from virl_quad.demo.render import ground_shifted
 
-    out = ground_shifted(demo, args.robot, args.ground_shifts)
+    out = ground_shifted(demo, args.robot, args.ground_shifts, args.ground)
     if out:
         print(f"ground-shift positives: the demonstration re-rendered at {len(out)} offsets along the ground",
               flush=True)
-    else:
-        print("ground-shift positives skipped: the re-render has another length than the demonstration", flush=True)
+    elif args.ground_shifts > 0:
+        print("no ground-shift positives: they need a reference motion, the checker ground and re-renders "
+              "as long as the demonstration", flush=True)
     return out
 
 

@@ -59,11 +59,9 @@ def test_ground_shift_renders_match_the_demo() -> None:
     assert len(variants) == 2 and all(v.shape == d.frames.shape for v in variants)
     # the robot is the same, only the ground moved: the frames differ, the demo is untouched
     assert all(np.abs(v.astype(int) - d.frames).mean() > 1.0 for v in variants)
-    # on the plain ground a shift changes nothing the camera sees, and no shifts are made
+    # on the plain ground there is no pattern to shift: no re-renders are made
     plain = demo_lib.load("trot", "pupper", ground="plain")
     assert _ground_shifts(TrainArgs(ground="plain", ground_shifts=2), plain) == []
-    from virl_quad.demo.render import ground_shifted
-    assert all(np.abs(v.astype(int) - plain.frames).mean() < 0.5 for v in ground_shifted(plain, "pupper", 2))
     with pytest.raises(ValueError, match="ground"):
         validate(TrainArgs(ground="grass"))
     assert _ground_shifts(TrainArgs(ground_shifts=0), d) == []

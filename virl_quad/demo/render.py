@@ -161,22 +161,22 @@ def render_demonstration(motion: Motion, robot: str, source: str = "", min_secon
                          displacement=root_displacement(motion, n, fps))
 
 
-def ground_shifted(demo: Demonstration, robot: str, n: int) -> list[np.ndarray]:
+def ground_shifted(demo: Demonstration, robot: str, n: int, ground: str = DEFAULT_GROUND) -> list[np.ndarray]:
     """The demonstration's frames re-rendered with the robot k/(n+1) of the ground pattern's
     period (two checker squares) further along, k = 1..n: the same motion where the follow
-    camera sees the ground at another phase (positives for a distance model). Of use on a
-    textured ground only: on the renderer's default plain ground they equal the
-    demonstration. Empty when the demonstration has no motion or a re-render comes out
-    at another length."""
+    camera sees the ground at another phase (positives for a distance model). ``ground``: the
+    one the demonstration was rendered on. Empty on the plain ground (no pattern: the re-renders
+    would equal the demonstration), without a motion, or when a re-render comes out at another
+    length."""
     from virl_quad.sim.world import CHECKER_SQUARE
 
-    if n <= 0 or demo.motion is None:
+    if n <= 0 or demo.motion is None or ground != "checker":
         return []
     period, m = 2 * CHECKER_SQUARE, demo.motion   # m
     out = []
     for k in range(1, n + 1):
         shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
-        frames = render_demonstration(shifted, robot, ground=demo.camera.get("ground", DEFAULT_GROUND)).frames
+        frames = render_demonstration(shifted, robot, ground=ground).frames
         if frames.shape != demo.frames.shape:
             return []
         out.append(frames)

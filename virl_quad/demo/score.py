@@ -143,9 +143,11 @@ def score_trajectory(traj: Trajectory, motion, ref_times: np.ndarray, robot: str
     return out
 
 
-def _record(env, policy: Callable[[dict], np.ndarray], obs: dict,
-            frames: list | None) -> tuple[Trajectory, np.ndarray, bool]:
-    """Run one episode from its first observation ``obs``; its trajectory, demo times (s), whether it fell."""
+def record_episode(env, policy: Callable[[dict], np.ndarray], obs: dict,
+                   frames: list | None = None) -> tuple[Trajectory, np.ndarray, bool]:
+    """Run one episode of ``env`` (a ``virl_quad.envs`` env) from its first observation ``obs``
+    with ``policy`` (obs -> action); its trajectory, demonstration times (s) and whether it fell.
+    ``frames``: a list to append ``env.render()`` previews to."""
     u = env.unwrapped
     rows, times, feet = [], [], []
 
@@ -199,7 +201,7 @@ def evaluate(policy: Callable[[dict], np.ndarray], robot: str, demo, episodes: i
         for ep in range(episodes):
             obs, _ = env.reset(seed=seed + ep)
             frames = [] if (video is not None and ep == 0) else None
-            traj, times, fell = _record(env, policy, obs, frames)
+            traj, times, fell = record_episode(env, policy, obs, frames)
             res = score_trajectory(traj, motion, times, robot, kin=kin)
             res.pop("per_step")
             steps = len(traj) - 1

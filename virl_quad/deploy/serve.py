@@ -68,7 +68,6 @@ class PolicyRunner:
         meta = policy.meta
         self.kp = np.asarray(meta["kp"], dtype=np.float64)            # N·m/rad
         self.kd = np.asarray(meta["kd"], dtype=np.float64)            # N·m·s/rad
-        self.action_clip = float(meta["action_clip"])
         self.frames = policy.demo_frames
         self.with_phase = policy.with_phase
         self.counts: Counter[str] = Counter()   # served, skipped reasons

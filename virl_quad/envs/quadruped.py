@@ -164,10 +164,11 @@ class QuadrupedEnv(gym.Env):
         if not np.all(np.isfinite(a)):
             raise ValueError("action contains NaN or inf")
         a = np.clip(a, -self.cfg.action_clip, self.cfg.action_clip)
-        target = self.robot.clip_to_limits(self.robot.default_pose + self.action_scale * a)
+        target = self.robot.default_pose + self.action_scale * a
         step = self.cfg.max_target_step
         if step is not None:   # as the safety layer does on the robot: rate limit, then the joint limits
-            target = self.robot.clip_to_limits(np.clip(target, self.last_target - step, self.last_target + step))
+            target = np.minimum(np.maximum(target, self.last_target - step), self.last_target + step)
+        target = self.robot.clip_to_limits(target)
         self.world.step(target)
         self.last_target = target
         self.steps += 1

@@ -222,7 +222,8 @@ class RewardModel:
             raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
         saved, mine = dict(d["config"]), self.cfg.to_dict()
         for key in RESUME_MAY_CHANGE:                 # how pairs are drawn and d becomes a reward
-            saved.pop(key, None), mine.pop(key, None)
+            saved.pop(key, None)
+            mine.pop(key, None)
         if saved != mine:
             raise ValueError("state was saved with a different RewardConfig")
         self.net.load_state_dict(d["net"])

@@ -20,7 +20,7 @@ from pybullet_utils.bullet_client import BulletClient
 from virl_quad.quiet import quiet_fd
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.sim import camera
-from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS, PhysicsParams  # noqa: F401 (re-exported)
+from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS, PhysicsParams
 from virl_quad.sim.pd import pd_torque
 
 GRAVITY = 9.81  # m/s²

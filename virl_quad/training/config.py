@@ -9,6 +9,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
+
 REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle")
 
 
@@ -38,7 +40,7 @@ class TrainArgs:
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
-    ground: str = field(default="checker", metadata={"choices": ("checker", "plain")})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
+    ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
@@ -60,8 +62,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
-    if args.ground not in ("checker", "plain"):
-        raise ValueError(f"unknown --ground {args.ground!r}; choose checker or plain")
+    if args.ground not in GROUNDS:
+        raise ValueError(f"unknown --ground {args.ground!r}; choose one of: {', '.join(GROUNDS)}")
     if args.ground_shifts < 0:
         raise ValueError(f"--ground-shifts must be >= 0, got {args.ground_shifts}")
     if args.adversarial_weight < 0:
