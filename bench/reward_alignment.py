@@ -26,6 +26,7 @@ policy's rollouts); the alignment is then measured on the usual seeds.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -34,7 +35,7 @@ import torch
 from scipy.stats import spearmanr
 
 from virl_quad import demo as demo_lib
-from virl_quad import envs
+from virl_quad import envs, robots
 from virl_quad.demo.render import ground_shifted
 from virl_quad.demo.score import record_episode, score_trajectory
 from virl_quad.demo.tracker import tracker_action
@@ -61,9 +62,11 @@ def controllers(robot: str, cycle: float) -> dict[str, object]:
     return out
 
 
-def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool, ground: str):
+def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool, ground: str,
+            speed_strip: bool = False):
     """(agent frames, expert frames, ground-truth total) of one episode."""
-    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground,
+                    speed_strip=speed_strip)
     rng = np.random.default_rng(seed)
     agent, expert = [], []
 
@@ -88,17 +91,21 @@ def fresh_model(a: argparse.Namespace):
 
     robot, gait = a.robot, a.demo
     demo = demo_lib.load(gait, robot, ground=a.ground)
-    clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
+    spec = robots.get(robot)
+    clips = [envs.expert_frames(demo_lib.load(g, robot, ground=a.ground), spec, a.speed_strip)
+             for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
-    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
-    shifts = ground_shifted(demo, robot, a.ground_shifts, a.ground)
-    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", shifts)
+    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights, speed_strip=a.speed_strip)
+    shifts = [envs.expert_frames(dataclasses.replace(demo, frames=f), spec, a.speed_strip)
+              for f in ground_shifted(demo, robot, a.ground_shifts, a.ground)]
+    rm = build_reward(cfg, envs.expert_frames(demo, spec, a.speed_strip), clips, 0, "cpu", shifts)
     for name, act in controllers(robot, float(demo.motion.duration)).items():
         for seed in range(1000, 1000 + a.train_seeds):
-            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)
+            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground,
+                                       a.speed_strip)
             rm.add_episode(agent, expert)
     print(f"training a fresh {a.variant} model on the {a.ground} ground: {a.updates} updates, adversarial "
-          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts", file=sys.stderr, flush=True)
+          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts, speed strip {'on' if a.speed_strip else 'off'}", file=sys.stderr, flush=True)
     for k in range(0, a.updates, 100):
         info = rm.update(min(100, a.updates - k))
         print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
@@ -120,6 +127,8 @@ def main() -> int:
     p.add_argument("--ground", choices=GROUNDS, help="ground of the renders (default: the run's demonstration's, "
                    "else checker; give it for a run whose demonstration does not record it)")
     p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders (checker only)")
+    p.add_argument("--speed-strip", action="store_true", help="--fresh: frames carry the speed strip "
+                   "(a run's own setting is used for RUN_DIR)")
     p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
     p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
     p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")
@@ -133,6 +142,7 @@ def main() -> int:
     else:
         try:
             rm, demo, _, robot = checkpoint.load_reward_model(a.run_dir)
+            a.speed_strip = bool(checkpoint.load(a.run_dir)["config"].get("speed_strip", False))
         except ValueError as e:
             raise SystemExit(f"error: {e}") from None
         a.ground = a.ground or demo.camera.get("ground") or DEFAULT_GROUND
@@ -142,7 +152,8 @@ def main() -> int:
     for name, act in controllers(robot, float(demo.motion.duration)).items():
         r_, s_ = [], []
         for seed in range(a.seeds):
-            agent, expert, score = rollout(robot, demo, act, seed, a.seconds, not a.no_randomize, a.ground)
+            agent, expert, score = rollout(robot, demo, act, seed, a.seconds, not a.no_randomize, a.ground,
+                                           a.speed_strip)
             with torch.no_grad():
                 d = rm.distance(torch.from_numpy(expert[:, None]), torch.from_numpy(agent[:, None]))[SKIP:, 0]
             r_.append(float(torch.exp(rm.cfg.w_d * d ** 2).mean()))
@@ -152,7 +163,7 @@ def main() -> int:
         scores += s_
         print(f"  {name:<30} reward {rows[-1][1]:.3f}  score {rows[-1][2]:.3f}", file=sys.stderr, flush=True)
     what = f"a fresh {a.variant} model (adversarial {a.adversarial_weight:g})" if a.fresh else f"run {a.run_dir}"
-    what += f", {a.ground} ground"
+    what += f", {a.ground} ground" + (", speed strip" if a.speed_strip else "")
     print(f"{what}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
           f"randomisation {'off' if a.no_randomize else 'on'}")
     print(f"{'controller':<32}{'reward':>8}{'score':>8}")

@@ -108,7 +108,7 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
         sources = []
     else:
         sources = [s.strip() for s in choice.split(",") if s.strip()]
-    clips = [demo_lib.load(s, args.robot, ground=args.ground).frames for s in sources]
+    clips = [_frames(demo_lib.load(s, args.robot, ground=args.ground), args) for s in sources]
     run_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(saved, **{f"clip{i:02d}": c for i, c in enumerate(clips)})
     if sources:
@@ -116,11 +116,24 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
     return clips
 
 
+def _frames(demo, args: TrainArgs, frames: np.ndarray | None = None) -> np.ndarray:
+    """``frames`` (default: the demonstration's) as the env shows them to the distance model:
+    with the demonstration's speed strip under ``--speed-strip``."""
+    from virl_quad import robots
+    from virl_quad.envs import expert_frames
+
+    d = demo if frames is None else dataclasses.replace(demo, frames=frames)
+    try:
+        return expert_frames(d, robots.get(args.robot), args.speed_strip)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+
 def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     """Ground-shift positives for the distance model (see render.ground_shifted)."""
     from virl_quad.demo.render import ground_shifted
 
-    out = ground_shifted(demo, args.robot, args.ground_shifts, args.ground)
+    out = [_frames(demo, args, f) for f in ground_shifted(demo, args.robot, args.ground_shifts, args.ground)]
     if out:
         print(f"ground-shift positives: the demonstration re-rendered at {len(out)} offsets along the ground",
               flush=True)
@@ -146,14 +159,17 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
-                          oracle_reward=oracle, ground=args.ground)
-    source = EnvReward() if oracle else LearnedReward(args.reward, demo.frames, args.num_envs,
+                          oracle_reward=oracle, ground=args.ground,
+                          speed_strip=args.speed_strip)
+    source = EnvReward() if oracle else LearnedReward(args.reward, _frames(demo, args), args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
                                                       lr=args.reward_lr, cyclic=demo.loop,
                                                       w_d=args.reward_wd,
                                                       other_clips=_other_clips(args, run_dir),
                                                       adversarial_weight=args.adversarial_weight,
-                                                      demo_variants=_ground_shifts(args, demo))
+                                                      demo_variants=_ground_shifts(args, demo),
+                                                      freeze_after=args.reward_freeze_after,
+                                                      speed_strip=args.speed_strip)
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -26,7 +27,7 @@ from virl_quad.deploy import protocol as P
 from virl_quad.deploy.harness import Monitor, Proc, export_untrained, policy_for_tests, start_hal, start_server
 from virl_quad.deploy.protocol import JointCommand
 from virl_quad.deploy.safety import SafetyConfig, is_safe_command, roll_pitch
-from virl_quad.deploy.zenoh_config import free_port
+from virl_quad.deploy.zenoh_config import free_port, publisher_options
 
 ROBOT_ID = "pupper-hil"
 SPEC = robots.get("pupper")
@@ -239,6 +240,23 @@ def test_real_time_loop_serves_state_and_obeys_the_operator(rig_factory):
     st = rig.wait(lambda s: s["mode"] == "DAMPING", "DAMPING after the E-stop")
     assert st["fault"] == "estop: rt" and st["accepted"] == 0, st
     assert rig.hal.stop(signal.SIGTERM) == 0, rig.logs()
+
+
+def test_a_command_naming_a_future_state_does_not_free_run_lock_step(rig_factory):
+    """A lock-step HAL advances one period per answered state; a command whose ref_seq names a
+    state not yet published (here 2**63) answers nothing, so with no policy the loop keeps the
+    real-time pace instead of running as fast as the CPU allows."""
+    rig = rig_factory()
+    st = rig.wait(lambda s: s["ticks"] >= 10, "a running lock-step loop")
+    cmd = JointCommand(SPEC.default_pose.copy(), SPEC.kp.copy(), SPEC.kd.copy(), np.zeros(12), ref_seq=2**63)
+    rig.mon.session.put(P.key(ROBOT_ID, "cmd"), P.encode_command(cmd, 1), **publisher_options("arm"))
+    st = rig.wait(lambda s: s["accepted"] >= 1, "the command accepted")
+    t0, ticks0 = time.monotonic(), st["ticks"]
+    time.sleep(2.0)
+    st = rig.mon.wait_status(lambda s: s["ticks"] > ticks0, TIMEOUT)
+    rate = (st["ticks"] - ticks0) / (time.monotonic() - t0)          # ticks per wall second
+    print(f"\n[lock-step after a future ref_seq] {rate:.1f} ticks/s (control rate {1 / SPEC.control_dt:g} Hz)")
+    assert rate < 1.5 / SPEC.control_dt, (rate, st)
 
 
 # ----------------------------------------------------------------------------- CLI errors

@@ -70,3 +70,37 @@ def test_ground_shift_renders_match_the_demo() -> None:
     assert _ground_shifts(TrainArgs(ground_shifts=3), no_motion) == []
     with pytest.raises(ValueError, match="ground-shifts"):
         validate(TrainArgs(ground_shifts=-1))
+
+
+def test_a_frozen_distance_model_stops_learning_and_remembers_when() -> None:
+    import torch
+
+    rng = np.random.default_rng(1)
+    frames = rng.integers(0, 255, (40, 48, 48), dtype=np.uint8)
+    source = LearnedReward("frame", frames, 2, 1, 0, freeze_after=1)
+    T, N = 12, 2
+
+    def rollout() -> tuple[torch.Tensor, dict]:
+        for _ in range(T):
+            agent = torch.from_numpy(rng.integers(0, 255, (N, 48, 48), dtype=np.uint8))
+            obs = {"agent_image": agent, "expert_image": torch.from_numpy(frames[:N].copy())}
+            final = {"final_agent_image": agent, "final_expert_image": obs["expert_image"]}
+            source.observe(obs, torch.zeros(N), torch.zeros(N), final)
+        return source.finish()
+
+    def weights() -> list[torch.Tensor]:
+        return [p.detach().clone() for p in source.model.net.parameters()]
+
+    before = weights()
+    _, info = rollout()                                   # rollout 1: the model still learns
+    learned = weights()
+    assert "distance/total" in info and any(not torch.equal(a, b) for a, b in zip(before, learned))
+    assert source.frozen and len(source.model.dataset.sequences()) > 0
+    rewards, info = rollout()                             # rollout 2: frozen, rewards still computed
+    assert "distance/total" not in info and rewards.shape == (T, N) and torch.isfinite(rewards).all()
+    assert all(torch.equal(a, b) for a, b in zip(learned, weights()))
+    again = LearnedReward("frame", frames, 2, 1, 0, freeze_after=1)
+    again.load_state_dict(source.state_dict())            # a resumed run stays frozen
+    assert again.rollouts == 2 and again.frozen
+    with pytest.raises(ValueError, match="freeze"):
+        validate(TrainArgs(reward_freeze_after=-1))

@@ -76,6 +76,29 @@ class Demonstration:
         """Frame index of demonstration step ``step`` (wraps when looping, else clamps)."""
         return step % self.num_frames if self.loop else min(max(step, 0), self.num_frames - 1)
 
+    def forward_speed(self, window: int) -> np.ndarray | None:
+        """(T,) m/s: the subject's forward travel over the ``window`` frames up to each frame, per
+        second (as the environment measures the agent's); None when the displacement is unknown.
+        A looping demonstration continues its travel across the wrap; a clip's first frames use
+        the frames they have."""
+        if self.displacement is None:
+            return None
+        x = np.asarray(self.displacement, dtype=np.float64)[:, 0]   # m, forward
+        T, w = len(x), max(int(window), 1)
+        if T < 2:
+            return np.zeros(T)
+        i = np.arange(T)
+        if self.loop:
+            lap = x[-1] - x[0] + (x[-1] - x[-2])                     # m, travel of one pass of the loop
+            j = i - w
+            back = np.where(j >= 0, x[np.maximum(j, 0)], x[j % T] - lap)
+            return (x - back) * self.fps / w
+        j = np.maximum(i - w, 0)
+        span = np.where(i > j, i - j, 1)
+        back = np.where(i > j, x[j], x[0])
+        ahead = np.where(i > j, x, x[min(1, T - 1)])
+        return (ahead - back) * self.fps / span
+
     def phase(self, step: int) -> float:
         """Demonstration phase in [0, 1) at step ``step``."""
         return self.index(step) / self.num_frames

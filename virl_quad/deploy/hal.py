@@ -92,7 +92,8 @@ class Hal:
         self.policy_alive = False            # a policy server's alive/policy token is present
         self.recorder = Recorder() if config.record else None
         self._cv = threading.Condition()
-        self._resp_ref = 0           # highest ref_seq of an accepted command
+        self._resp_ref = 0           # highest ref_seq of an accepted command answering a published state
+        self._state_seq = 0          # sequence number of the newest state published
         self._resp_any = 0           # accepted commands with ref_seq 0 (unknown)
         self._arms: deque[bytes] = deque(maxlen=16)   # ARM payloads, handled in the loop thread
         self._announce = P.announce_body(spec, robot_id)
@@ -136,8 +137,8 @@ class Hal:
         with self._cv:
             if ref == 0:
                 self._resp_any += 1
-            else:
-                self._resp_ref = max(self._resp_ref, ref)
+            elif ref <= self._state_seq:    # a ref_seq beyond the newest state answers nothing: one
+                self._resp_ref = max(self._resp_ref, ref)   # such command must not free-run lock-step
             self._cv.notify_all()
 
     def _on_policy(self, sample: zenoh.Sample) -> None:
@@ -222,11 +223,19 @@ class Hal:
             return None
         try:
             self.last_t = float(state.timestamp)
-            return self.state_pub.put(lambda s: P.encode_state(state, s))
+            return self.state_pub.put(lambda s: self._encode_state(state, s))
         except Exception as e:   # a malformed state from a driver: the tick will judge it
             self.errors["publish_state"] += 1
             self.log.once(f"pub-{type(e).__name__}", f"could not publish a state (counted): {e}")
             return None
+
+    def _encode_state(self, state: RobotState, seq: int) -> bytes:
+        """Encode ``state`` as number ``seq``, which answers may name from now on (set before the
+        message leaves, so a fast answer is never taken for one from the future)."""
+        data = P.encode_state(state, seq)
+        with self._cv:
+            self._state_seq = seq
+        return data
 
     def _wait_answer(self, seq: int, any_before: int, deadline: float, stop: StopFlag) -> bool:
         """Wait until a command answering state ``seq`` was accepted, or ``deadline``."""

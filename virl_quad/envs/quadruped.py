@@ -6,6 +6,8 @@ Observation (``gymnasium.spaces.Dict``):
                   the randomised physical parameters (critic only),
 - ``agent_image`` uint8 (48, 48): the follow camera's view of the agent,
 - ``expert_image`` uint8 (48, 48): with a demonstration, its frame at the env's demonstration clock.
+With ``speed_strip`` both images carry the forward speed in their bottom rows (``sim.strip.stamp_speed``):
+the agent's measured over the last ``SPEED_WINDOW`` steps, the demonstration's from its displacement.
 Action: joint position offsets from the default pose, ``target = default + action_scale * a`` (rad),
 clipped to the joint limits and moved at most ``max_target_step`` rad per step (the deploy safety
 layer's limit). No task reward (0.0): the VIRL reward is computed by the trainer.
@@ -25,6 +27,7 @@ from virl_quad.envs import observation as obs_lib
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
+from virl_quad.sim.strip import SPEED_WINDOW, stamp_speed
 from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
 from virl_quad.sim.world import RobotState, World
 
@@ -52,6 +55,8 @@ class EnvConfig:
     ground: str | None = None              # what the camera sees of the ground, "checker" or "plain";
                                            # None: the demonstration's, else DEFAULT_GROUND
     demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
+    speed_strip: bool = False              # draw the forward speed into both images' bottom rows
+                                           # (needs the demonstration's displacement)
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     terminate_on_fall: bool = True         # end the episode when the robot falls
     oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
@@ -78,6 +83,17 @@ def _ground(cfg: EnvConfig) -> str:
     return cfg.ground or demo_ground or DEFAULT_GROUND
 
 
+def expert_frames(demo: Demonstration, spec: RobotSpec, speed_strip: bool) -> np.ndarray:
+    """The frames of ``demo`` as the env shows them: as they are, or with the speed strip
+    (its forward speed from the displacement; ValueError when the displacement is unknown)."""
+    if not speed_strip:
+        return demo.frames
+    speed = demo.forward_speed(SPEED_WINDOW)
+    if speed is None:
+        raise ValueError(f"the speed strip needs the demonstration's displacement; {demo.source or 'this one'} has none")
+    return stamp_speed(demo.frames, speed, spec.strip_full_speed)
+
+
 class QuadrupedEnv(gym.Env):
     """One robot, one episode at a time. Build it with ``virl_quad.envs.make``."""
 
@@ -94,6 +110,7 @@ class QuadrupedEnv(gym.Env):
         if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
             raise ValueError(f"demonstration is at {self.demo.fps:.3f} fps but {spec.name} is controlled at "
                              f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
+        self._expert_frames = None if cfg.demo is None else expert_frames(cfg.demo, spec, cfg.speed_strip)
         self.action_scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
         seconds = cfg.episode_seconds if cfg.episode_seconds is not None else spec.episode_seconds
         self.max_steps = int(round(seconds / spec.control_dt))
@@ -114,6 +131,7 @@ class QuadrupedEnv(gym.Env):
         self.steps = 0
         self.demo_step = 0
         self._history: deque = deque(maxlen=8)
+        self._travel: deque = deque(maxlen=SPEED_WINDOW + 1)   # base (x, y), m, of the last steps
         self._next_push = np.inf
         self._state: RobotState | None = None
         self._kin = None
@@ -140,11 +158,23 @@ class QuadrupedEnv(gym.Env):
         self.last_action = np.zeros(12)
         self.steps = 0
         self._history.clear()
+        self._travel.clear()
         self._state = self.world.state()
         self.last_target = self._state.q.copy()   # rad: the rate limit starts from the pose
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
+
+    def _forward_speed(self) -> float:
+        """m/s: the base's travel along its heading over the last SPEED_WINDOW steps (the
+        instantaneous velocity at an episode's first step), as Demonstration.forward_speed."""
+        s = self._state
+        yaw = float(s.rpy[2])
+        heading = np.array([np.cos(yaw), np.sin(yaw)])
+        if len(self._travel) < 2:
+            return float(s.base_lin_vel[:2] @ heading)
+        moved = self._travel[-1] - self._travel[0]
+        return float(moved @ heading) / ((len(self._travel) - 1) * self.robot.control_dt)
 
     def _place_robot(self) -> None:
         motion = self.demo.motion if self.demo is not None else None
@@ -206,6 +236,7 @@ class QuadrupedEnv(gym.Env):
 
     # -- observation -----------------------------------------------------------------------------
     def _remember(self, s: RobotState) -> None:
+        self._travel.append(np.array(s.base_pos[:2], dtype=np.float64))
         self._history.append((s.time, s.base_quat, s.base_ang_vel_body, s.q, s.dq))
 
     def _delayed(self) -> tuple[np.ndarray, ...]:
@@ -243,13 +274,16 @@ class QuadrupedEnv(gym.Env):
         ]).astype(np.float32)
         out = {"policy": policy, "privileged": privileged, "agent_image": self._agent_image()}
         if self.demo is not None:
-            out["expert_image"] = self.demo.frames[self.demo.index(self.demo_step)]
+            out["expert_image"] = self._expert_frames[self.demo.index(self.demo_step)]
         return out
 
     def _agent_image(self) -> np.ndarray:
         if not self.cfg.render:
             return np.zeros((FRAME_SIZE, FRAME_SIZE), np.uint8)
-        return self.world.render(cam=self.rand.camera)
+        img = self.world.render(cam=self.rand.camera)
+        if self.cfg.speed_strip:
+            img = stamp_speed(img, self._forward_speed(), self.robot.strip_full_speed)
+        return img
 
     def _info(self) -> dict:
         s = self._state

@@ -14,7 +14,7 @@ VARIANTS: tuple[str, ...] = ("virl", "frame", "sequence", "no_ae", "gaifo")
 POSITIVE_PAIRS: tuple[str, ...] = ("gaussian_noise", "out_of_sync", "duplicate_first",
                                    "duplicate_last", "same_source", "ground_shift")
 NEGATIVE_PAIRS: tuple[str, ...] = ("reversed", "frozen_frame", "shuffled_one", "shuffled_both",
-                                   "expert_vs_agent", "other_clip")
+                                   "expert_vs_agent", "other_clip", "speed_shift")
 
 
 @dataclass
@@ -81,6 +81,8 @@ class RewardConfig:
                                       # current mean episode length (project choice: CPU cost)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from
                                       # them wrap around their end (else they must fit inside)
+    speed_strip: bool = False         # frames carry the speed strip (virl_quad.sim.strip): enables the
+                                      # speed_shift negatives (project addition)
     warp_min: float = 0.5             # paper: demonstration replay speed range [0.5, 2.0]
     warp_max: float = 2.0             # (sampled log-uniformly, project choice)
 

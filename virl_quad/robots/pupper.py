@@ -35,5 +35,6 @@ SPEC = RobotSpec(
     camera_height=0.0,                                  # m
     camera_yaw=0.0,                                     # deg: side view from the right, robot walks left to right
     camera_pitch=-15.0,                                 # deg
+    strip_full_speed=0.5,                               # m/s, twice the built-in trot's speed
     notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
 )

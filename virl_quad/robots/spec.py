@@ -74,6 +74,7 @@ class RobotSpec:
     camera_yaw: float               # deg, 0 = side view from the robot's right, +x to the right of the image
     camera_pitch: float             # deg, negative looks down
     episode_seconds: float = 10.0   # s, time limit of one training episode
+    strip_full_speed: float = 0.5   # m/s drawn as a half-width bar by the speed strip (sim.strip.stamp_speed)
     notes: str = ""
     extra: dict = field(default_factory=dict)
 
