@@ -39,6 +39,10 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
     return set(vars(probe.parse_known_args(argv)[0]))
 
 
+#: Options added after runs were made, with the value that reproduces those runs on resume.
+LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0}
+
+
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
     """Apply --resume (saved config + explicitly typed options) and pick the run folder."""
     if args.resume:
@@ -47,7 +51,8 @@ def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict
             raise UserError(f"resume folder {run_dir} does not exist")
         data = checkpoint.load(run_dir)
         checkpoint.check_action_facts(data, data["config"]["robot"])
-        saved = TrainArgs(**{k: v for k, v in data["config"].items() if k in {f.name for f in dataclasses.fields(TrainArgs)}})
+        names = {f.name for f in dataclasses.fields(TrainArgs)}
+        saved = TrainArgs(**{**LEGACY, **{k: v for k, v in data["config"].items() if k in names}})
         args = dataclasses.replace(saved, **{k: getattr(args, k) for k in explicit if k not in ("resume", "run_dir")},
                                    resume=str(run_dir), run_dir=str(run_dir))
         return args, run_dir, data
@@ -169,7 +174,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                                                       adversarial_weight=args.adversarial_weight,
                                                       demo_variants=_ground_shifts(args, demo),
                                                       freeze_after=args.reward_freeze_after,
-                                                      speed_strip=args.speed_strip)
+                                                      speed_strip=args.speed_strip,
+                                                      speed_shift_weight=args.speed_shift_weight)
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,

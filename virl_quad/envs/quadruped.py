@@ -132,6 +132,7 @@ class QuadrupedEnv(gym.Env):
         self.demo_step = 0
         self._history: deque = deque(maxlen=8)
         self._travel: deque = deque(maxlen=SPEED_WINDOW + 1)   # base (x, y), m, of the last steps
+        self._start_heading = np.array([1.0, 0.0])               # world xy direction of "forward"
         self._next_push = np.inf
         self._state: RobotState | None = None
         self._kin = None
@@ -160,17 +161,20 @@ class QuadrupedEnv(gym.Env):
         self._history.clear()
         self._travel.clear()
         self._state = self.world.state()
+        yaw = float(self._state.rpy[2])
+        self._start_heading = np.array([np.cos(yaw), np.sin(yaw)])   # unit, world xy
         self.last_target = self._state.q.copy()   # rad: the rate limit starts from the pose
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
 
     def _forward_speed(self) -> float:
-        """m/s: the base's travel along its heading over the last SPEED_WINDOW steps (the
-        instantaneous velocity at an episode's first step), as Demonstration.forward_speed."""
+        """m/s: the base's travel along the episode's first heading over the last SPEED_WINDOW
+        steps (the instantaneous velocity at an episode's first step), as
+        Demonstration.forward_speed measures the demonstration's along its first frame's heading:
+        a robot that turns away shows less speed."""
         s = self._state
-        yaw = float(s.rpy[2])
-        heading = np.array([np.cos(yaw), np.sin(yaw)])
+        heading = self._start_heading
         if len(self._travel) < 2:
             return float(s.base_lin_vel[:2] @ heading)
         moved = self._travel[-1] - self._travel[0]

@@ -43,6 +43,7 @@ class TrainArgs:
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
     ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
     speed_strip: bool = False          # draw the forward speed (m/s) into the bottom rows of agent and expert frames, as the authors' code joined the base velocity to the image: on the plain ground the frames then show travel too (needs the demonstration's displacement)
+    speed_shift_weight: float = 0.25   # with --speed-strip: sampling weight of negatives whose strip shows another speed (same legs), which teach the distance model to read the strip (1 made it score every agent behaviour ~0 in bench/reward_alignment.py)
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
@@ -62,6 +63,8 @@ def validate(args: TrainArgs) -> None:
     for name in ("num_envs", "iterations", "steps_per_env", "save_every"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
+    if args.speed_shift_weight < 0:
+        raise ValueError(f"--speed-shift-weight must be >= 0, got {args.speed_shift_weight}")
     if args.reward_freeze_after < 0:
         raise ValueError(f"--reward-freeze-after must be >= 0, got {args.reward_freeze_after}")
     if args.reward_wd >= 0:

@@ -42,8 +42,10 @@ class LearnedReward:
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
                  cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
                  demo_variants: list[np.ndarray] | None = None, freeze_after: int = 0,
-                 speed_strip: bool = False) -> None:
+                 speed_strip: bool = False, speed_shift_weight: float = 1.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
+        if speed_shift_weight != 1.0:
+            weights["speed_shift"] = float(speed_shift_weight)
         cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights,
                            speed_strip=speed_strip)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device, demo_variants)
