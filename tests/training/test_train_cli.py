@@ -25,21 +25,30 @@ def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
 
 
+#: Pupper also runs with the plain ground, the speed strip and a distance model frozen after 2 iterations.
+EXTRA = {"pupper": ["--ground", "plain", "--speed-strip", "--reward-freeze-after", "2"], "laikago": []}
+
+
 @pytest.mark.parametrize("robot", ["pupper", "laikago"])
 def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
-    p = run("virl_quad.train", "--robot", robot, "--iterations", "2", "--run-dir", str(run_dir), *TINY)
+    p = run("virl_quad.train", "--robot", robot, "--iterations", "2", "--run-dir", str(run_dir), *TINY, *EXTRA[robot])
     assert p.returncode == 0, p.stderr[-2000:]
     assert "it     2/2" in p.stdout
     data = checkpoint.load(run_dir)
     assert data["iteration"] == 2 and data["env_steps"] == 2 * 4 * 8
+    assert data["config"]["speed_strip"] == bool(EXTRA[robot]) and data["reward"]["rollouts"] == 2
+    net2 = data["reward"]["net"]
     report = json.loads((run_dir / "report.json").read_text())
     assert 0 <= report["evaluation"]["total"] <= 1
     # resume continues from iteration 2
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
     assert p.returncode == 0, p.stderr[-2000:]
     assert "resumed at iteration 2" in p.stdout and "it     3/3" in p.stdout
-    assert checkpoint.load(run_dir)["iteration"] == 3
+    data = checkpoint.load(run_dir)
+    assert data["iteration"] == 3 and data["config"]["speed_strip"] == bool(EXTRA[robot])
+    same = all(torch.equal(net2[k], v) for k, v in data["reward"]["net"].items())
+    assert same == bool(EXTRA[robot])            # frozen after 2 iterations (the resume kept the option)
     # export, load, act
     out = tmp_path / "policy.pt"
     p = run("virl_quad.export", str(run_dir), "--out", str(out))
