@@ -40,7 +40,8 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 
 #: Options added after runs were made, with the value that reproduces those runs on resume.
-LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0}
+LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0,
+                              "reward_warmup": 0}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
@@ -206,6 +207,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             runner.restore(data)
             print(f"resumed at iteration {runner.current_learning_iteration} "
                   f"({runner.env_steps:,d} env steps)", flush=True)
+        elif args.reward_warmup > 0 and hasattr(runner.reward_source, "warm_up"):
+            runner.reward_source.warm_up(args.reward_warmup, log=lambda s: print(s, flush=True))
         print(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
               f"{', with reference motion' if demo.motion is not None else ''}", flush=True)
         runner.train(args.iterations, args.minutes, args.save_every, args.eval_every,

@@ -25,8 +25,9 @@ def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
 
 
-#: Pupper also runs with the plain ground, the speed strip and a distance model frozen after 2 iterations.
-EXTRA = {"pupper": ["--ground", "plain", "--speed-strip", "--reward-freeze-after", "2"], "laikago": []}
+#: Pupper also runs with the plain ground, the speed strip, a distance-model warm-up and the model frozen after 2 iterations.
+EXTRA = {"pupper": ["--ground", "plain", "--speed-strip", "--reward-freeze-after", "2", "--reward-warmup", "3"],
+         "laikago": []}
 
 
 @pytest.mark.parametrize("robot", ["pupper", "laikago"])
@@ -35,6 +36,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     p = run("virl_quad.train", "--robot", robot, "--iterations", "2", "--run-dir", str(run_dir), *TINY, *EXTRA[robot])
     assert p.returncode == 0, p.stderr[-2000:]
     assert "it     2/2" in p.stdout
+    assert ("distance-model warm-up:     3/3 updates" in p.stdout) == bool(EXTRA[robot]), p.stdout[-2000:]
     data = checkpoint.load(run_dir)
     assert data["iteration"] == 2 and data["env_steps"] == 2 * 4 * 8
     assert data["config"]["speed_strip"] == bool(EXTRA[robot]) and data["reward"]["rollouts"] == 2

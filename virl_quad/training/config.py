@@ -37,6 +37,7 @@ class TrainArgs:
     episode_seconds: float = 10.0      # s, training episode time limit
     randomize: bool = True             # domain randomisation during training
     reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
+    reward_warmup: int = 0             # distance-model updates on the demonstration material alone before the first iteration of a new run (0: none, as in the paper; the online model gets only reward_updates per iteration and ranked standing first early in session 4's run)
     reward_freeze_after: int = 0       # iterations after which the distance model stops learning and the reward stays fixed (0: it learns all run long, as in the paper; session 3 measured the online model's ranking of behaviour decay late in a run)
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
@@ -65,6 +66,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.speed_shift_weight < 0:
         raise ValueError(f"--speed-shift-weight must be >= 0, got {args.speed_shift_weight}")
+    if args.reward_warmup < 0:
+        raise ValueError(f"--reward-warmup must be >= 0, got {args.reward_warmup}")
     if args.reward_freeze_after < 0:
         raise ValueError(f"--reward-freeze-after must be >= 0, got {args.reward_freeze_after}")
     if args.reward_wd >= 0:

@@ -84,6 +84,16 @@ class LearnedReward:
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
 
+    def warm_up(self, updates: int, log=print, every: int = 100) -> None:
+        """Train the distance model for ``updates`` batches on the demonstration material alone
+        (the demonstration, other clips: no agent data yet) before the first rollout, printing
+        the loss every ``every`` updates: its first rewards then already tell motion from
+        stillness and order from disorder, instead of coming from random weights."""
+        for k in range(0, updates, every):
+            info = self.model.update(min(every, updates - k))
+            log(f"distance-model warm-up: {min(k + every, updates):5d}/{updates} updates, "
+                f"loss {info.get('total', float('nan')):.4f}")
+
     @property
     def frozen(self) -> bool:
         """True once the distance model has stopped learning (``freeze_after`` rollouts done)."""
