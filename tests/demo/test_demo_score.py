@@ -76,7 +76,6 @@ def test_term_errors_are_what_they_say(gait_motions):
 
 
 def test_evaluate_a_policy_in_the_environment(gait_motions, tmp_path):
-    spec = robots.get("laikago")
     demo = render.render_demonstration(gait_motions[("laikago", "trot")], "laikago", min_seconds=0.5)
     res = score.evaluate(lambda obs: np.zeros(12), "laikago", demo, episodes=2, seed=3, episode_seconds=1.0,
                          randomize=False, video=str(tmp_path / "eval.mp4"))

@@ -7,12 +7,8 @@ counted under exactly one rejection reason -- the expected one where it is known
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import time
 from collections import Counter
-from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -26,24 +22,9 @@ N_MESSAGES = 10_000
 SEED = 20240606
 
 
-def load_fuzzing() -> ModuleType:
-    """``tests/deploy/fuzzing.py`` (shared with test_hil_fuzz.py), loaded by path: pytest's
-    importlib mode puts no test folder on sys.path."""
-    name = "virl_quad_tests_deploy_fuzzing"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("fuzzing.py"))
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-_fuzzing = load_fuzzing()
-CATEGORIES, WEIGHTS, Fuzzer = _fuzzing.CATEGORIES, _fuzzing.WEIGHTS, _fuzzing.Fuzzer
-
-
 @pytest.mark.parametrize("robot", ["pupper", "laikago"])
-def test_fuzz_commands_through_decode_and_safety(robot):
+def test_fuzz_commands_through_decode_and_safety(robot, fuzzing):
+    CATEGORIES, WEIGHTS, Fuzzer = fuzzing.CATEGORIES, fuzzing.WEIGHTS, fuzzing.Fuzzer
     from virl_quad import robots
 
     spec = robots.get(robot)

@@ -24,7 +24,7 @@ from virl_quad.deploy.backends.pupper_serial import (
     PupperSerialBackend,
     encode_frame,
 )
-from virl_quad.deploy.protocol import JointCommand, RobotState
+from virl_quad.deploy.protocol import JointCommand
 from virl_quad.deploy.safety import SafetyController
 
 

@@ -25,13 +25,10 @@ per-period step limit between powered ticks, DAMPING: no kp, no feed-forward; ID
 
 from __future__ import annotations
 
-import importlib.util
 import signal
-import sys
 import time
 from collections import Counter
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -45,21 +42,6 @@ from virl_quad.deploy.protocol import JointCommand
 from virl_quad.deploy.safety import SafetyConfig, is_safe_command
 from virl_quad.deploy.zenoh_config import free_port, publisher_options
 
-
-def load_fuzzing() -> ModuleType:
-    """``tests/deploy/fuzzing.py`` (shared with test_deploy_fuzz.py), loaded by path: pytest's
-    importlib mode puts no test folder on sys.path."""
-    name = "virl_quad_tests_deploy_fuzzing"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("fuzzing.py"))
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-_fuzzing = load_fuzzing()
-CATEGORIES, WEIGHTS, Fuzzer = _fuzzing.CATEGORIES, _fuzzing.WEIGHTS, _fuzzing.Fuzzer
 
 ROBOT_ID = "pupper-fuzz"
 SPEC = robots.get("pupper")
@@ -130,7 +112,8 @@ class Rig:
         self.hal.close()
 
 
-def test_fuzz_10000_messages_at_a_running_hal(tmp_path):
+def test_fuzz_10000_messages_at_a_running_hal(tmp_path, fuzzing):
+    CATEGORIES, WEIGHTS, Fuzzer = fuzzing.CATEGORIES, fuzzing.WEIGHTS, fuzzing.Fuzzer
     record = tmp_path / "fuzz.npz"
     rng = np.random.default_rng(SEED)
     fz = Fuzzer(SPEC, rng)

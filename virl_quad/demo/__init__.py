@@ -18,12 +18,16 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from virl_quad import robots
 from virl_quad.demo.demonstration import Demonstration, MotionLike, MotionState
 from virl_quad.sim.params import DEFAULT_GROUND
+
+if TYPE_CHECKING:
+    from virl_quad.demo.motion import Motion
 
 # The heavier modules (scipy, OpenCV, PyBullet, Pinocchio) load on first use: the environment
 # imports this package for the Demonstration class alone.
