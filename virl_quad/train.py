@@ -165,7 +165,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
-                          oracle_reward=oracle, ground=args.ground,
+                          oracle_reward=oracle, ground=args.ground, render=not oracle,   # oracle: no frames needed
                           speed_strip=args.speed_strip)
     source = EnvReward() if oracle else LearnedReward(args.reward, _frames(demo, args), args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
