@@ -26,7 +26,6 @@ policy's rollouts); the alignment is then measured on the usual seeds.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -96,7 +95,7 @@ def fresh_model(a: argparse.Namespace):
              for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
     cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights, speed_strip=a.speed_strip)
-    shifts = [envs.expert_frames(dataclasses.replace(demo, frames=f), spec, a.speed_strip)
+    shifts = [envs.expert_frames(demo, spec, a.speed_strip, f)
               for f in ground_shifted(demo, robot, a.ground_shifts, a.ground)]
     rm = build_reward(cfg, envs.expert_frames(demo, spec, a.speed_strip), clips, 0, "cpu", shifts)
     for name, act in controllers(robot, float(demo.motion.duration)).items():

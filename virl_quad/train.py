@@ -128,9 +128,8 @@ def _frames(demo, args: TrainArgs, frames: np.ndarray | None = None) -> np.ndarr
     from virl_quad import robots
     from virl_quad.envs import expert_frames
 
-    d = demo if frames is None else dataclasses.replace(demo, frames=frames)
     try:
-        return expert_frames(d, robots.get(args.robot), args.speed_strip)
+        return expert_frames(demo, robots.get(args.robot), args.speed_strip, frames)
     except ValueError as e:
         raise UserError(str(e)) from None
 

@@ -88,16 +88,13 @@ class Demonstration:
         if T < 2:
             return np.zeros(T)
         i = np.arange(T)
-        if self.loop:
+        if self.loop:                                                # frames before 0: the previous lap
             lap = x[-1] - x[0] + (x[-1] - x[-2])                     # m, travel of one pass of the loop
-            j = i - w
-            back = np.where(j >= 0, x[np.maximum(j, 0)], x[j % T] - lap)
+            back = x[(i - w) % T] - lap * (i < w)
             return (x - back) * self.fps / w
-        j = np.maximum(i - w, 0)
-        span = np.where(i > j, i - j, 1)
-        back = np.where(i > j, x[j], x[0])
-        ahead = np.where(i > j, x, x[min(1, T - 1)])
-        return (ahead - back) * self.fps / span
+        lo = np.maximum(i - w, 0)
+        hi = np.maximum(i, 1)                                        # frame 0: the step to frame 1
+        return (x[hi] - x[lo]) * self.fps / (hi - lo)
 
     def phase(self, step: int) -> float:
         """Demonstration phase in [0, 1) at step ``step``."""

@@ -83,15 +83,18 @@ def _ground(cfg: EnvConfig) -> str:
     return cfg.ground or demo_ground or DEFAULT_GROUND
 
 
-def expert_frames(demo: Demonstration, spec: RobotSpec, speed_strip: bool) -> np.ndarray:
-    """The frames of ``demo`` as the env shows them: as they are, or with the speed strip
-    (its forward speed from the displacement; ValueError when the displacement is unknown)."""
+def expert_frames(demo: Demonstration, spec: RobotSpec, speed_strip: bool,
+                  frames: np.ndarray | None = None) -> np.ndarray:
+    """``frames`` (default: the demonstration's; e.g. a re-render of the same motion) as the env
+    shows them: as they are, or with the speed strip of ``demo`` (its forward speed from the
+    displacement; ValueError when the displacement is unknown)."""
+    frames = demo.frames if frames is None else frames
     if not speed_strip:
-        return demo.frames
+        return frames
     speed = demo.forward_speed(SPEED_WINDOW)
     if speed is None:
         raise ValueError(f"the speed strip needs the demonstration's displacement; {demo.source or 'this one'} has none")
-    return stamp_speed(demo.frames, speed, spec.strip_full_speed)
+    return stamp_speed(frames, speed, spec.strip_full_speed)
 
 
 class QuadrupedEnv(gym.Env):
@@ -240,7 +243,8 @@ class QuadrupedEnv(gym.Env):
 
     # -- observation -----------------------------------------------------------------------------
     def _remember(self, s: RobotState) -> None:
-        self._travel.append(np.array(s.base_pos[:2], dtype=np.float64))
+        if self.cfg.speed_strip:                 # only the strip needs the recent travel
+            self._travel.append(np.array(s.base_pos[:2], dtype=np.float64))
         self._history.append((s.time, s.base_quat, s.base_ang_vel_body, s.q, s.dq))
 
     def _delayed(self) -> tuple[np.ndarray, ...]:

@@ -58,4 +58,3 @@ def render(client: int, target: np.ndarray, cam: CameraParams, size: int = FRAME
         shadow=0, flags=pybullet.ER_NO_SEGMENTATION_MASK, physicsClientId=client)
     img = np.asarray(px, dtype=np.uint8).reshape(size, size, 4)
     return img[..., :3].copy() if rgb else rgb_to_gray(img)
-
