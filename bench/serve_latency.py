@@ -9,7 +9,11 @@ own round trip. Both run back-to-back (next state as soon as the answer arrives)
 paced at 100 Hz.
 
 Goals: p99 <= 1 ms at 100 Hz through the server; server median <= 1.5 x the raw median.
-Figures depend on what else the machine is doing: the load average is printed.
+Figures depend on what else the machine is doing: the load average is printed. So does
+the cost of one ``PolicyRunner.handle`` (decode, observation, policy, encode) in this
+process, hot and after the thread idled 0.2 ms and 10 ms: on a virtual machine whose
+caches go cold while a vCPU idles, this cold-start penalty, not the server's code, sets
+the tail at 100 Hz.
 """
 
 from __future__ import annotations
@@ -140,6 +144,28 @@ def stats(a: np.ndarray) -> dict[str, float]:
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
 
 
+def handle_cost(policy: Path, n: int = 300) -> dict[str, float]:
+    """Median µs of one PolicyRunner.handle here: hot (back-to-back) and after sleeping 0.2 / 10 ms."""
+    from virl_quad.deploy.serve import PolicyRunner, load
+
+    runner = PolicyRunner(load(str(policy)))
+    state = P.RobotState.zeros(runner.spec.default_pose)
+    msgs = iter([P.encode_state(state, i + 1) for i in range(200 + 3 * n)])
+    for _ in range(200):                                   # warm-up
+        runner.handle(next(msgs))
+    out = {}
+    for label, idle in (("hot", 0.0), ("after 0.2 ms idle", 2e-4), ("after 10 ms idle", 1e-2)):
+        t = []
+        for _ in range(n):
+            if idle:
+                time.sleep(idle)
+            t0 = time.perf_counter_ns()
+            runner.handle(next(msgs))
+            t.append((time.perf_counter_ns() - t0) / 1e3)
+        out[label] = float(np.median(t))
+    return out
+
+
 def run_peer(hal: FakeHal, proc: Proc, n: int, paced: int, label: str) -> dict[str, tuple[dict, int]]:
     """Wait for the peer's liveliness, warm up, measure both series, stop the peer."""
     ok = wait_until(lambda: any(r.ok is not None for r in hal.session.liveliness().get(
@@ -186,6 +212,7 @@ def main() -> None:
         for e in reversed(hal.entities):
             e.undeclare()
         session.close()
+    cost = handle_cost(policy)
     load1 = os.getloadavg()
     print(f"{'round trip, µs':<34}{'median':>9}{'p99':>9}{'max':>9}{'lost':>6}")
     for mode in ("back-to-back", "100 Hz"):
@@ -199,6 +226,9 @@ def main() -> None:
         work = [ln.split("; ")[-1] for ln in res["log"].splitlines() if "compute per command" in ln]
         print(f"{label}'s own time, state received -> command published (last 4096): "
               f"{work[-1] if work else 'not reported'}")
+    print("PolicyRunner.handle in this process, median µs: "
+          + ", ".join(f"{k} {v:.0f}" for k, v in cost.items())
+          + f"  (cold-start penalty x{cost['after 10 ms idle'] / cost['hot']:.1f} at 10 ms)")
     p99 = res_srv["100 Hz"][0]["p99"]
     print(f"server p99 at 100 Hz: {p99 / 1e3:.3f} ms  (goal <= 1 ms: {'met' if p99 <= 1000 else 'NOT met'})")
     print(f"load average after: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
