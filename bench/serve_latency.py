@@ -106,7 +106,7 @@ class FakeHal:
     def round_trip(self) -> float | None:
         """One state -> command round trip in µs (None if no answer within 1 s)."""
         seq = self._seq()
-        msg = P.encode_state(self.state, seq)
+        msg = P.encode_state(self.state, seq, active=True)
         assert len(msg) == 464
         self._got.clear()
         self._waiting = seq
@@ -150,7 +150,7 @@ def handle_cost(policy: Path, n: int = 300) -> dict[str, float]:
 
     runner = PolicyRunner(load(str(policy)))
     state = P.RobotState.zeros(runner.spec.default_pose)
-    msgs = iter([P.encode_state(state, i + 1) for i in range(200 + 3 * n)])
+    msgs = iter([P.encode_state(state, i + 1, active=True) for i in range(200 + 3 * n)])
     for _ in range(200):                                   # warm-up
         runner.handle(next(msgs))
     out = {}

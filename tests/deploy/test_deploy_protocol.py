@@ -69,6 +69,7 @@ def test_announce_body():
     m = decode(P.encode_json(MsgType.ANNOUNCE, body, seq=1))
     assert m.body["joint_order"] == list(spec.joint_names) and m.body["control_dt"] == pytest.approx(0.02)
     assert m.body["robot"] == "pupper" and m.body["protocol_version"] == P.PROTOCOL_VERSION
+    assert m.body["active_flag"] is True
 
 
 def test_documented_command_layout_by_hand():
@@ -217,10 +218,11 @@ def test_command_encoder_matches_encode_command() -> None:
 def test_state_values_agree_with_decode(with_base):
     st = _state(with_base)
     st.dq[3] = np.inf                                    # carried as it is: the receiver judges it
-    data = P.encode_state(st, seq=9)
-    seq, f = P.decode_state_values(data)
+    data = P.encode_state(st, seq=9, active=with_base)
+    seq, flags, f = P.decode_state_values(data)
     body = decode(data, expect=MsgType.STATE).body
-    assert seq == 9
+    assert seq == 9 and bool(flags & P.STATE_FLAG_ACTIVE) == with_base
+    assert bool(flags & P.STATE_FLAG_BASE) == with_base == (body.base_pos is not None)
     for name, sl in (("q", P.STATE_Q), ("dq", P.STATE_DQ), ("quat", P.STATE_QUAT), ("gyro", P.STATE_GYRO)):
         np.testing.assert_array_equal(f[sl], getattr(body, name))
 

@@ -69,7 +69,7 @@ def test_runner_uses_the_training_observation_and_skips_bad_states(untrained):
     st.quat = 1.04 * unit                                  # off unit norm: the runner normalises it
     last = np.zeros(12)
     for k in range(3):
-        out, reason = runner.handle(P.encode_state(st, 10 + k))
+        out, reason = runner.handle(P.encode_state(st, 10 + k, active=True))
         assert reason == "" and out is not None
         msg = P.decode(out, expect=MsgType.COMMAND)
         obs = policy_observation(spec, unit, st.gyro, st.q, st.dq, last, (k % 40) / 40)
@@ -81,14 +81,39 @@ def test_runner_uses_the_training_observation_and_skips_bad_states(untrained):
         last = np.clip(action, -untrained.meta["action_clip"], untrained.meta["action_clip"])
     bad = P.RobotState.zeros(spec.default_pose)
     bad.dq[4] = np.nan
-    assert runner.handle(P.encode_state(bad, 20)) == (None, "non_finite_state")
+    assert runner.handle(P.encode_state(bad, 20, active=True)) == (None, "non_finite_state")
     bad = P.RobotState.zeros(spec.default_pose)
     bad.quat = np.zeros(4)
-    assert runner.handle(P.encode_state(bad, 21)) == (None, "bad_quaternion")
+    assert runner.handle(P.encode_state(bad, 21, active=True)) == (None, "bad_quaternion")
     assert runner.handle(b"junk") == (None, "bad_message:bad_size")
-    assert runner.handle(P.encode_state(st, 5)) == (None, "stale_state")      # older than the last served
+    assert runner.handle(P.encode_state(st, 5, active=True)) == (None, "stale_state")      # older than the last served
     assert runner.handle(P.encode_json(MsgType.STATUS, {}, 30))[1] == "bad_message:wrong_type"
     assert runner.k == 3 and runner.counts["served"] == 3 and runner.counts["non_finite_state"] == 1
+
+
+def test_runner_clock_starts_at_the_first_active_state(untrained):
+    """States the HAL will not act on (IDLE, RAMP, DAMPING) are answered from the episode start
+    (phase 0, last action 0) without advancing it; the first ACTIVE state is step 0 of an episode,
+    as after a training env's reset. Without the HAL's active_flag the clock runs from the start."""
+    spec = untrained.spec
+    st = P.RobotState.zeros(spec.default_pose)
+    st.dq = np.random.default_rng(1).normal(0.0, 1.0, 12)   # non-zero input: a non-zero action
+    runner = PolicyRunner(untrained)
+    first = untrained.act(policy_observation(spec, st.quat, st.gyro, st.q, st.dq, np.zeros(12), 0.0))
+    seq = iter(range(1, 100))
+    for _ in range(5):                                           # ramping: not applied
+        out, _ = runner.handle(P.encode_state(st, next(seq)))
+        np.testing.assert_allclose(P.decode(out).body.q_target, untrained.joint_targets(first))
+        assert runner.k == 0 and not runner.last_action.any()
+    for k in range(3):                                           # ACTIVE: the episode runs
+        runner.handle(P.encode_state(st, next(seq), active=True))
+        assert runner.k == k + 1 and runner.last_action.any()
+    runner.handle(P.encode_state(st, next(seq)))                 # DAMPING: back to the start
+    assert runner.k == 0 and not runner.last_action.any()
+    legacy = PolicyRunner(untrained)
+    legacy.gate_on_active = False                                # a HAL without active_flag
+    legacy.handle(P.encode_state(st, 1))
+    assert legacy.k == 1
 
 
 def test_announce_check_names_the_mismatch(untrained):

@@ -7,6 +7,9 @@ run independent of machine load: no assertion depends on wall-clock timing, only
 
 (a) the policy drives the Pupper for 10 s of sim time: every applied command is safe, the
     robot stays up; with the trained ``policies/pupper_trot.pt`` it must also move forward
+(a') a policy that walks in the training env (``policies/pupper_trot_tracker_bc.pt``, the
+    privileged tracker distilled by ``python -m virl_quad.distill``; not VIRL) walks through
+    the HAL and the server too: forward, upright, as far as in the env within a factor 2
 (b) SIGKILL of the server -> DAMPING after 3 held periods (seen in STATUS); a restarted
     server drives the robot again only after a re-arm
 (c) E-stop (also with an undecodable payload) damps and latches; bad commands are counted
@@ -24,7 +27,7 @@ import pytest
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
-from virl_quad.deploy.harness import Monitor, Proc, export_untrained, policy_for_tests, start_hal, start_server
+from virl_quad.deploy.harness import ROOT, Monitor, Proc, export_untrained, policy_for_tests, start_hal, start_server
 from virl_quad.deploy.protocol import JointCommand
 from virl_quad.deploy.safety import SafetyConfig, is_safe_command, roll_pitch
 from virl_quad.deploy.zenoh_config import free_port, publisher_options
@@ -35,6 +38,7 @@ TIMEOUT = 120.0                  # s, generous waits for a loaded 2-core machine
 LOCKSTEP = ("--lockstep", "--lockstep-timeout", "2.0")   # a slow server never misses a period
 DRIVE_SECONDS = 10.0             # s of simulated time driven by the policy
 MIN_FORWARD = 0.25               # m in DRIVE_SECONDS: "moves forward" for the trained policy
+WALKER = ROOT / "policies" / "pupper_trot_tracker_bc.pt"   # a policy known to walk (behaviour cloning)
 
 
 @pytest.fixture(scope="module")
@@ -98,19 +102,7 @@ def rig_factory():
 def drive(policy, tmp_path_factory):
     """Run HAL + server until the policy has driven DRIVE_SECONDS of sim time; the HAL's record."""
     path, trained = policy
-    rec = tmp_path_factory.mktemp("hil_drive") / "run.npz"
-    rig = Rig("--arm", "--record", str(rec))
-    try:
-        srv = rig.server(path)
-        n = int(round(DRIVE_SECONDS / SPEC.control_dt))
-        st = rig.wait(lambda s: s["applied"] >= n + 5 or s["mode"] == "DAMPING", f"{n} applied commands")
-        assert st["mode"] == "ACTIVE", f"the HAL left ACTIVE: {st}\n{rig.logs()}"
-        assert rig.hal.stop(signal.SIGINT) == 0, rig.logs()
-        assert srv.stop(signal.SIGINT) == 0, rig.logs()
-        logs = rig.logs()
-    finally:
-        rig.close()
-    data = dict(np.load(rec))
+    data, n, st, logs = _hil_run(path, tmp_path_factory, "hil_drive")
     return data, n, trained, st, logs
 
 
@@ -157,6 +149,67 @@ def test_trained_policy_moves_forward(drive):
     dx = data["base_pos"][i0 + n, 0] - data["base_pos"][i0, 0]
     print(f"\nHIL: trained policy moved {dx:+.3f} m forward in {DRIVE_SECONDS:g} s")
     assert dx > MIN_FORWARD, f"moved only {dx:.3f} m (want > {MIN_FORWARD} m)\n{logs}"
+
+
+def _hil_run(path, tmp_path_factory, name: str):
+    """HAL + server until the policy has driven DRIVE_SECONDS of sim time; the HAL's record."""
+    rec = tmp_path_factory.mktemp(name) / "run.npz"
+    rig = Rig("--arm", "--record", str(rec))
+    try:
+        srv = rig.server(path)
+        n = int(round(DRIVE_SECONDS / SPEC.control_dt))
+        st = rig.wait(lambda s: s["applied"] >= n + 5 or s["mode"] == "DAMPING", f"{n} applied commands")
+        assert st["mode"] == "ACTIVE", f"the HAL left ACTIVE: {st}\n{rig.logs()}"
+        assert rig.hal.stop(signal.SIGINT) == 0, rig.logs()
+        assert srv.stop(signal.SIGINT) == 0, rig.logs()
+        logs = rig.logs()
+    finally:
+        rig.close()
+    return dict(np.load(rec)), n, st, logs
+
+
+def _env_run(path) -> tuple[float, bool]:
+    """(forward distance m, fell?) of the policy in the training env, started as a HAL starts it:
+    standing in the default pose at demonstration phase 0, no randomisation."""
+    from virl_quad import demo as demo_lib
+    from virl_quad import envs
+    from virl_quad.policy_io import load_policy
+
+    policy = load_policy(path)
+    env = envs.make("pupper", demo=demo_lib.load("trot", "pupper"), randomize=False, render=False, rsi=False,
+                    episode_seconds=DRIVE_SECONDS)
+    try:
+        obs, _ = env.reset(seed=0, options={"demo_step": 0})
+        x0, done, fell = float(env.unwrapped.state.base_pos[0]), False, False
+        while not done:
+            obs, _, fell, done, _ = env.step(policy.act(obs["policy"]))
+            done = done or fell
+        return float(env.unwrapped.state.base_pos[0]) - x0, bool(fell)
+    finally:
+        env.close()
+
+
+def test_a_walking_policy_walks_the_same_through_the_hal_and_the_server(tmp_path_factory):
+    """The deployment chain (observation builder, phase clock, gains, safety limits, protocol)
+    reproduces the training environment: what walks there walks here."""
+    assert WALKER.is_file(), f"{WALKER} missing: python -m virl_quad.distill --robot pupper"
+    dx_env, fell = _env_run(WALKER)
+    assert not fell and dx_env > MIN_FORWARD, f"the walker does not walk in the env ({dx_env:+.3f} m, fell {fell})"
+    data, n, _, logs = _hil_run(WALKER, tmp_path_factory, "hil_walk")
+    modes = [str(m) for m in data["modes"]]
+    mode = np.array([modes[i] for i in data["mode"]])
+    i0 = int(np.flatnonzero(mode == "ACTIVE")[0])
+    win = np.arange(i0, i0 + n + 1)
+    assert np.all(mode[win] == "ACTIVE"), logs
+    tilt = np.array([np.abs(roll_pitch(q)) for q in data["quat"][win]])
+    assert tilt[:, 0].max() < SPEC.max_roll and tilt[:, 1].max() < SPEC.max_pitch
+    assert data["base_pos"][win, 2].min() > SPEC.min_base_height
+    dx = data["base_pos"][win[-1], 0] - data["base_pos"][win[0], 0]
+    print(f"\nHIL: walker moved {dx:+.3f} m in {DRIVE_SECONDS:g} s through HAL + server; "
+          f"{dx_env:+.3f} m in the training env")
+    assert dx > MIN_FORWARD, f"moved only {dx:.3f} m (want > {MIN_FORWARD} m)\n{logs}"
+    assert 0.5 < dx / dx_env < 2.0, f"HIL {dx:.3f} m against env {dx_env:.3f} m\n{logs}"
+    assert "skipped none" in logs and "Traceback" not in logs, logs
 
 
 # ----------------------------------------------------------------------------- (b) server killed

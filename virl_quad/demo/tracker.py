@@ -21,16 +21,18 @@ DEFAULT_LEAD = 0.08    # s
 
 
 def tracker_action(env, gain: float = DEFAULT_GAIN, lead: float = DEFAULT_LEAD, motion=None,
-                   delay: float = 0.0) -> np.ndarray:
+                   delay: float = 0.0, q: np.ndarray | None = None) -> np.ndarray:
     """The action for the current step of ``env`` (a ``virl_quad.envs`` environment), in the
     env's units (target offset / action scale). ``motion``: what to track (default: the
     demonstration's reference motion); ``delay`` (s): track it that much behind the
-    demonstration clock (half a cycle: the right motion out of phase)."""
+    demonstration clock (half a cycle: the right motion out of phase); ``q`` (rad): the joint
+    angles to feed back (default: the simulator's true ones)."""
     u = env.unwrapped
     motion = motion if motion is not None else u.demo.motion
     if motion is None:
         raise ValueError("the demonstration has no reference motion to track")
     t = u.demo_step / u.demo.fps - delay             # s, demonstration clock
     q_ref = motion.state_at(t).q
-    target = motion.state_at(t + lead).q + gain * (q_ref - u.state.q)
+    q = u.state.q if q is None else np.asarray(q, dtype=np.float64)
+    target = motion.state_at(t + lead).q + gain * (q_ref - q)
     return (target - u.robot.default_pose) / u.action_scale

@@ -232,7 +232,7 @@ class Hal:
     def _encode_state(self, state: RobotState, seq: int) -> bytes:
         """Encode ``state`` as number ``seq``, which answers may name from now on (set before the
         message leaves, so a fast answer is never taken for one from the future)."""
-        data = P.encode_state(state, seq)
+        data = P.encode_state(state, seq, active=self.ctl.mode == Mode.ACTIVE)
         with self._cv:
             self._state_seq = seq
         return data

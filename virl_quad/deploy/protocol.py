@@ -47,6 +47,7 @@ STATE_PAYLOAD_SIZE: int = _STATE_HEAD.size + 8 * _STATE_NF   # 432
 STATE_Q, STATE_DQ = slice(0, 12), slice(12, 24)          # in the doubles: rad, rad/s
 STATE_QUAT, STATE_GYRO = slice(36, 40), slice(40, 43)    # xyzw, rad/s
 STATE_FLAG_BASE = 0x1                  # base_pos / base_vel are valid (simulation only)
+STATE_FLAG_ACTIVE = 0x2                # the HAL is ACTIVE: a command answering this state will be applied
 CONTACT_UNKNOWN = 255                  # wire value of a foot without a contact sensor
 _CONTACT_OF_WIRE = np.ones(256)        # wire byte -> contact: 0 -> 0.0, 255 -> NaN, other -> 1.0
 _CONTACT_OF_WIRE[0], _CONTACT_OF_WIRE[CONTACT_UNKNOWN] = 0.0, np.nan
@@ -208,8 +209,9 @@ def _vec(a: Any, n: int, name: str) -> np.ndarray:
     return v
 
 
-def encode_state(state: RobotState, seq: int, stamp_ns: int | None = None) -> bytes:
-    """Encode a STATE message. NaN/inf are carried as they are (the receiver judges them)."""
+def encode_state(state: RobotState, seq: int, stamp_ns: int | None = None, active: bool = False) -> bytes:
+    """Encode a STATE message. NaN/inf are carried as they are (the receiver judges them).
+    ``active``: set the ACTIVE flag (the HAL will apply a command that answers this state)."""
     has_base = state.base_pos is not None and state.base_vel is not None
     contacts = _vec(state.contacts, NUM_FEET, "contacts")
     wire_contacts = [CONTACT_UNKNOWN if not np.isfinite(c) else int(c > 0.5) for c in contacts]
@@ -221,7 +223,8 @@ def encode_state(state: RobotState, seq: int, stamp_ns: int | None = None) -> by
         _vec(state.base_pos, 3, "base_pos") if has_base else nan3,
         _vec(state.base_vel, 3, "base_vel") if has_base else nan3,
     ])
-    payload = _STATE_HEAD.pack(STATE_FLAG_BASE if has_base else 0, *wire_contacts) + floats.astype("<f8").tobytes()
+    flags = (STATE_FLAG_BASE if has_base else 0) | (STATE_FLAG_ACTIVE if active else 0)
+    payload = _STATE_HEAD.pack(flags, *wire_contacts) + floats.astype("<f8").tobytes()
     return _frame(MsgType.STATE, seq, payload, stamp_ns)
 
 
@@ -269,11 +272,12 @@ def encode_json(mtype: MsgType, body: dict[str, Any], seq: int, stamp_ns: int | 
 
 
 def announce_body(spec: Any, robot_id: str, role: str = "hal") -> dict[str, Any]:
-    """ANNOUNCE payload for a RobotSpec: robot name, id, joint order, control period (s)."""
+    """ANNOUNCE payload for a RobotSpec: robot name, id, joint order, control period (s), and
+    ``active_flag``: this HAL sets ``STATE_FLAG_ACTIVE`` on the states whose answers it applies."""
     return {
         "robot": spec.name, "robot_id": check_robot_id(robot_id), "role": role,
         "protocol_version": PROTOCOL_VERSION, "joint_order": list(spec.joint_names),
-        "control_dt": float(spec.control_dt),
+        "control_dt": float(spec.control_dt), "active_flag": True,
     }
 
 
@@ -315,13 +319,15 @@ def decode(data: Any, expect: MsgType | None = None) -> Message:
     return Message(mt, seq, stamp_ns, body)
 
 
-def decode_state_values(data: Any) -> tuple[int, np.ndarray]:
-    """A STATE's seq and its float64 values (read-only, indexed by ``STATE_Q``, ``STATE_DQ``,
-    ``STATE_QUAT``, ``STATE_GYRO``), after every check of ``decode(data, MsgType.STATE)``.
+def decode_state_values(data: Any) -> tuple[int, int, np.ndarray]:
+    """A STATE's seq, its flags (``STATE_FLAG_*``) and its float64 values (read-only, indexed by
+    ``STATE_Q``, ``STATE_DQ``, ``STATE_QUAT``, ``STATE_GYRO``), after every check of
+    ``decode(data, MsgType.STATE)``.
 
     For a loop that runs once per state and needs only the measurements: no objects built."""
     buf, _, seq, _ = _checked_frame(data, MsgType.STATE)
-    return seq, np.frombuffer(buf, dtype="<f8", count=_STATE_NF, offset=HEADER_SIZE + _STATE_HEAD.size)
+    (flags,) = _STATE_FLAGS.unpack_from(buf, HEADER_SIZE)
+    return seq, flags, np.frombuffer(buf, dtype="<f8", count=_STATE_NF, offset=HEADER_SIZE + _STATE_HEAD.size)
 
 
 def _checked_frame(data: Any, expect: MsgType | None) -> tuple[bytes, MsgType, int, int]:

@@ -11,6 +11,13 @@ policy and publishes a COMMAND on ``virl/<id>/cmd``: ``q_target`` from
 ``ref_seq`` = the state's ``seq``. The demonstration phase is the server's own step
 counter: ``phase = (k % demo_frames) / demo_frames`` (0 without a demonstration).
 
+The clock and the last action start as a training episode starts them (k = 0, last action
+0) at the first state the HAL flags ACTIVE (``STATE_FLAG_ACTIVE``: the answer will be
+applied). States before it (IDLE, the RAMP to the default pose, DAMPING) are answered from
+that starting point without advancing it, so a HAL that ramps for 2 s, or is re-armed,
+starts the policy at phase 0. A HAL whose ANNOUNCE lacks ``active_flag`` gets the old
+behaviour: the clock runs from the first state served (logged at start).
+
 States with NaN/inf or a non-unit quaternion are skipped (not answered) and counted; so
 are undecodable or reordered ones. When the HAL's token disappears the server stops
 commanding and waits for it to come back (then checks its ANNOUNCE again).
@@ -71,16 +78,19 @@ class PolicyRunner:
         self.frames = policy.demo_frames
         self.with_phase = policy.with_phase
         self.counts: Counter[str] = Counter()   # served, skipped reasons
+        self.gate_on_active = True              # advance the clock only on ACTIVE-flagged states
         self._lock = threading.Lock()
         self._seq = P.SeqCounter()
         self._encode = P.CommandEncoder(self.kp, self.kd, np.zeros(P.NUM_JOINTS))   # no feed-forward
+        self._zero_action = np.zeros(P.NUM_JOINTS)
+        self._zero_action.flags.writeable = False
         self.reset()
 
     def reset(self) -> None:
         """Start again: step counter 0, last action 0 (a new HAL session)."""
         with self._lock:
             self.k = 0                                  # commands sent: demonstration clock
-            self.last_action = np.zeros(P.NUM_JOINTS)   # clipped, unscaled (as in training)
+            self.last_action = self._zero_action        # clipped, unscaled (as in training)
             self.last_state_seq = -1
 
     def phase(self) -> float | None:
@@ -94,12 +104,16 @@ class PolicyRunner:
 
         Never raises: malformed, reordered or non-finite states are skipped with a reason."""
         try:
-            seq, f = P.decode_state_values(data)
+            seq, flags, f = P.decode_state_values(data)
         except ProtocolError as e:
             return self._skip(f"bad_message:{e.reason}")
         with self._lock:
             if seq <= self.last_state_seq:
                 return self._skip("stale_state")
+            live = not self.gate_on_active or bool(flags & P.STATE_FLAG_ACTIVE)
+            if not live:                                         # not applied: stay at the episode start
+                self.k = 0
+                self.last_action = self._zero_action
             quat = f[P.STATE_QUAT]
             x, y, z, w = quat.tolist()
             norm2 = x * x + y * y + z * z + w * w
@@ -117,9 +131,11 @@ class PolicyRunner:
                 action = self.policy.act(obs)
             except ValueError:                                  # the policy produced NaN/inf
                 return self._skip("policy_non_finite")
-            self.last_action = self.policy.clip_action(action)  # as training observes it
-            q_target = self.policy.joint_targets(self.last_action)   # rad, within the joint limits
-            self.k += 1
+            clipped = self.policy.clip_action(action)           # as training observes it
+            q_target = self.policy.joint_targets(clipped)       # rad, within the joint limits
+            if live:
+                self.last_action = clipped
+                self.k += 1
             out = self._encode(q_target, seq, self._seq())
         self.counts["served"] += 1
         return out, ""
@@ -210,6 +226,9 @@ class Server:
         problem = check_announce(body, self.runner.policy.meta, self.robot_id)
         if problem:
             raise UserError(problem)
+        self.runner.gate_on_active = bool(body.get("active_flag"))
+        if not self.runner.gate_on_active:
+            self.log("the HAL does not flag ACTIVE states: the phase clock runs from the first state served")
         return True
 
     def run(self, stop: StopFlag, wait: float) -> None:
