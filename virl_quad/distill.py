@@ -28,7 +28,6 @@ Three choices make the student learnable:
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -64,6 +63,7 @@ class DistillArgs:
     blind_last_action: bool = True          # the student ignores the last-action input (no copying the teacher's last action)
     noise: float = 0.0                      # std of Gaussian noise on the executed action (action units), for robustness
     randomize: bool = False                 # domain randomisation while gathering (off: the nominal robot, as the sim HAL)
+    max_latency: float = 0.04               # s, largest observation delay drawn with --randomize (training's 0.04)
     seed: int = 0                           # random seed
     quiet: bool = False                     # no progress lines
 
@@ -179,7 +179,8 @@ def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
         # that learns to copy it drifts on its own (causal confusion): it does not get to see it.
         blind_to(actor, "last_action")
     rng, gen = np.random.default_rng(args.seed), torch.Generator().manual_seed(args.seed)
-    pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, render=False, rsi=rsi,
+    ranges = {"latency": (0.0, args.max_latency)} if args.randomize else None
+    pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, randomization=ranges, render=False, rsi=rsi,
                            episode_seconds=10.0) for rsi in (False, True))
     all_obs, all_act, history, k = [], [], [], 0
     try:

@@ -3,8 +3,9 @@
 - :func:`start_hal`, :func:`start_server`: ``python -m virl_quad.deploy.hal|serve`` as
   subprocesses, output captured to a file (no pipe can fill up and block them)
 - :class:`Monitor` (= :class:`virl_quad.deploy.operator.Operator`): newest STATUS, ARM, E-stop
-- :func:`policy_for_tests`: the trained ``policies/pupper_trot.pt`` if present, else an
-  untrained export (same format and metadata) in a given folder
+- :func:`policy_for_tests`: the shipped Pupper policy (the policy server's default,
+  :func:`virl_quad.deploy.serve.default_policy`) if present, else an untrained export (same
+  format and metadata) in a given folder
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from virl_quad.deploy.operator import Operator, wait_until
 Monitor = Operator
 
 ROOT: Path = Path(__file__).resolve().parents[2]
-TRAINED_POLICY: Path = ROOT / "policies" / "pupper_trot.pt"
 
 
 def port_open(port: int, host: str = "127.0.0.1") -> bool:
@@ -101,10 +101,13 @@ def start_server(policy: Path | str, endpoint: str, robot_id: str, *extra: str) 
 
 
 def policy_for_tests(folder: Path | str) -> tuple[Path, bool]:
-    """(policy path, trained?): ``policies/pupper_trot.pt`` if it exists, else an untrained
-    Pupper policy exported into ``folder`` (demonstration of 40 frames)."""
-    if TRAINED_POLICY.is_file():
-        return TRAINED_POLICY, True
+    """(policy path, shipped?): the policy server's default Pupper policy if one is shipped,
+    else an untrained Pupper policy exported into ``folder`` (demonstration of 40 frames)."""
+    from virl_quad.deploy.serve import default_policy
+
+    shipped = default_policy()
+    if shipped.is_file():
+        return shipped, True
     return export_untrained(folder, "pupper"), False
 
 

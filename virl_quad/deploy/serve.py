@@ -46,8 +46,18 @@ from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config,
 from virl_quad.deploy.protocol import MsgType, ProtocolError
 from virl_quad.envs.observation import policy_observation
 
-#: The policy served when --policy is not given (written by the training pipeline).
-DEFAULT_POLICY = Path(__file__).resolve().parents[2] / "policies" / "pupper_trot.pt"
+_POLICIES = Path(__file__).resolve().parents[2] / "policies"
+#: Policies served when --policy is not given, the first one present: the VIRL policy of the
+#: training pipeline (once a run passes its bar), then the shipped behaviour-cloned tracker
+#: (``python -m virl_quad.distill``: walks on the nominal robot; not learned from video).
+SHIPPED_POLICIES: tuple[Path, ...] = (_POLICIES / "pupper_trot.pt", _POLICIES / "pupper_trot_tracker_bc.pt")
+
+
+def default_policy() -> Path:
+    """The first of :data:`SHIPPED_POLICIES` that exists (else the first, for the error message)."""
+    return next((p for p in SHIPPED_POLICIES if p.is_file()), SHIPPED_POLICIES[0])
+
+
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"     # the HAL's listen endpoint in deploy/zenoh/peer.json5
 
 
@@ -55,7 +65,7 @@ DEFAULT_CONNECT = "tcp/127.0.0.1:7447"     # the HAL's listen endpoint in deploy
 class ServeConfig:
     """Settings of one policy-server process."""
 
-    policy: str = str(DEFAULT_POLICY)    # exported policy NAME.pt (NAME.json beside it)
+    policy: str = ""                     # exported policy NAME.pt (NAME.json beside it); "": default_policy()
     robot_id: str | None = None          # HAL's robot id; default "<policy robot>-01"
     zenoh: str = "peer"                  # Zenoh config: name in deploy/zenoh/ or a .json5 path
     connect: list[str] | None = None     # connect endpoints; default the config's, else DEFAULT_CONNECT
@@ -299,7 +309,8 @@ def main(config: ServeConfig) -> int:
     """Serve ``config.policy`` until SIGINT/SIGTERM; returns the exit code (bad input: UserError,
     ValueError or FileNotFoundError, printed as one line with exit code 2 by run_main)."""
     torch.set_num_threads(max(1, config.threads))
-    policy = load(config.policy)
+    path = config.policy or str(default_policy())
+    policy = load(path)
     robot_id = P.check_robot_id(config.robot_id or f"{policy.meta['robot']}-01")
     conf = open_config(config.zenoh, listen=config.listen or [], connect=config.connect)
     if not config.connect and conf.get_json("connect/endpoints").strip() in ("[]", "null"):
@@ -311,8 +322,10 @@ def main(config: ServeConfig) -> int:
     # the collector's reach, so a collection triggered while serving scans only new objects.
     gc.collect()
     gc.freeze()
-    log(f"policy {config.policy} for {policy.meta['robot']} ({len(policy.meta['joint_names'])} joints, "
-        f"{1 / float(policy.meta['control_dt']):g} Hz, demo frames {runner.frames}); waiting for HAL {robot_id!r}")
+    meta = policy.meta
+    log(f"policy {path} (reward: {meta.get('reward', 'not recorded')}) for {meta['robot']} "
+        f"({len(meta['joint_names'])} joints, {1 / float(meta['control_dt']):g} Hz, demo frames {runner.frames}); "
+        f"waiting for HAL {robot_id!r}")
     with StopFlag() as stop:
         with open_session(conf) as session:
             server = Server(runner, session, robot_id, log)
@@ -330,7 +343,8 @@ def main(config: ServeConfig) -> int:
 def config_from_args(argv: list[str] | None = None) -> ServeConfig:
     """Parse the command line into a :class:`ServeConfig`."""
     p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.serve", description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", default=str(DEFAULT_POLICY), help="exported policy NAME.pt (default %(default)s)")
+    p.add_argument("--policy", default="", help="exported policy NAME.pt (default: the first present of "
+                   + ", ".join(str(x.relative_to(_POLICIES.parent)) for x in SHIPPED_POLICIES) + ")")
     p.add_argument("--robot-id", help="the HAL's robot id (default <policy robot>-01)")
     p.add_argument("--zenoh", default="peer", help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
     p.add_argument("--connect", action="append", help=f"endpoint of the HAL (repeatable; default the config's, "
