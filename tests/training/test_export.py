@@ -79,3 +79,27 @@ def test_policy_rejects_nan_observation(tmp_path: Path) -> None:
     obs[3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         policy.act(obs)
+
+
+def test_fast_path_for_a_normaliser_with_tiny_std(tmp_path: Path) -> None:
+    """An input that barely varies in the data (std 1e-4, as a behaviour-cloned policy's) makes
+    the actor's outputs huge far off that scale; the fast path is still taken, and matches on
+    the policy's own input scale."""
+    actor = fresh_actor(seed=1)
+    actor.obs_normalizer.train()
+    data = torch.randn(512, 44) * 0.3
+    data[:, 2] = 1e-4 * torch.randn(512) - 1.0          # gravity z: almost constant
+    actor.update_normalization(TensorDict({"policy": data}, batch_size=[512]))
+    actor.eval()
+    policy = load_policy(export_actor(actor, "pupper", tmp_path / "p.pt", demo={"num_frames": 50}))
+    assert policy.fast is not None
+    x = (data[:64] * 1.5).numpy()
+    with torch.inference_mode():
+        want = policy.module(torch.from_numpy(x)).numpy()
+    np.testing.assert_allclose(np.stack([policy.act(row) for row in x]), want, rtol=1e-5, atol=1e-5)
+
+
+def test_shipped_policies_run_on_the_fast_path() -> None:
+    shipped = sorted((Path(__file__).resolve().parents[2] / "policies").glob("*.pt"))
+    for path in shipped:
+        assert load_policy(path).fast is not None, path
