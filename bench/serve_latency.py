@@ -5,7 +5,10 @@ STATE (464 B) and times until the COMMAND (424 B) answering it (``ref_seq``) arr
 the real ``python -m virl_quad.deploy.serve`` in another process. Beside it, the same
 measurement against a raw Zenoh echo process (same payload sizes, same QoS, a Python
 callback that only copies the sequence number into a fixed reply) gives the transport's
-own round trip. Both run back-to-back (next state as soon as the answer arrives) and
+own round trip. Both peers run at once and the bench takes turns between them (the order
+swapped every round), so that a ratio compares the two under the same machine
+conditions: on a shared virtual machine the transport alone varies 2x from minute to
+minute. Back-to-back (next state as soon as the answer arrives) and with each peer
 paced at 100 Hz.
 
 Goals: p99 <= 1 ms at 100 Hz through the server; server median <= 1.5 x the raw median.
@@ -40,11 +43,12 @@ from virl_quad.deploy.harness import Proc, policy_for_tests, wait_until  # noqa:
 from virl_quad.deploy.protocol import MsgType  # noqa: E402
 from virl_quad.deploy.zenoh_config import free_port, load_config, publisher_options  # noqa: E402
 
-ROBOT_ID = "bench-01"
+ROBOT_ID = "bench-01"          # the policy server's robot
+ECHO_ID = "echo-01"            # the raw echo's (both run at once; the bench alternates between them)
 _U64 = struct.Struct("<Q")
 
 
-def echo(endpoint: str) -> None:
+def echo(endpoint: str, robot_id: str = ECHO_ID) -> None:
     """Raw ping-pong peer: answer each STATE-sized sample with a COMMAND-sized one carrying
     the sample's seq at the ref_seq offset. Runs until SIGINT / SIGTERM."""
     from virl_quad.deploy._zenoh_io import StopFlag
@@ -52,7 +56,7 @@ def echo(endpoint: str) -> None:
     conf = load_config("peer", listen=[], connect=[endpoint])
     reply = bytearray(P.encode_command(P.JointCommand(*(np.zeros(12) for _ in range(4))), 1))
     with zenoh.open(conf) as s:
-        pub = s.declare_publisher(P.key(ROBOT_ID, "cmd"), **publisher_options("cmd"))
+        pub = s.declare_publisher(P.key(robot_id, "cmd"), **publisher_options("cmd"))
 
         work = []
 
@@ -64,8 +68,8 @@ def echo(endpoint: str) -> None:
             pub.put(bytes(out))
             work.append((time.perf_counter_ns() - t0) / 1e3)
 
-        sub = s.declare_subscriber(P.key(ROBOT_ID, "state"), on_state)
-        token = s.liveliness().declare_token(P.liveliness_key(ROBOT_ID, "policy"))
+        sub = s.declare_subscriber(P.key(robot_id, "state"), on_state)
+        token = s.liveliness().declare_token(P.liveliness_key(robot_id, "policy"))
         with StopFlag() as stop:
             while not stop.wait(0.2):
                 pass
@@ -80,20 +84,20 @@ def echo(endpoint: str) -> None:
 class FakeHal:
     """The HAL side: announce, liveliness, state out, command in (timed in the callback)."""
 
-    def __init__(self, session: zenoh.Session, spec) -> None:
-        self.session = session
-        self.announce = P.encode_json(MsgType.ANNOUNCE, P.announce_body(spec, ROBOT_ID), 1)
+    def __init__(self, session: zenoh.Session, spec, robot_id: str) -> None:
+        self.session, self.robot_id = session, robot_id
+        self.announce = P.encode_json(MsgType.ANNOUNCE, P.announce_body(spec, robot_id), 1)
         self.state = P.RobotState.zeros(spec.default_pose)
-        self.pub = session.declare_publisher(P.key(ROBOT_ID, "state"), **publisher_options("state"))
+        self.pub = session.declare_publisher(P.key(robot_id, "state"), **publisher_options("state"))
         self._waiting = -1
         self._t_recv = 0
         self._got = threading.Event()
         self._seq = P.SeqCounter()
         self.entities = [
             self.pub,
-            session.declare_queryable(P.key(ROBOT_ID, "announce"), lambda q: q.reply(q.key_expr, self.announce)),
-            session.declare_subscriber(P.key(ROBOT_ID, "cmd"), self._on_cmd),
-            session.liveliness().declare_token(P.liveliness_key(ROBOT_ID, "hal")),
+            session.declare_queryable(P.key(robot_id, "announce"), lambda q: q.reply(q.key_expr, self.announce)),
+            session.declare_subscriber(P.key(robot_id, "cmd"), self._on_cmd),
+            session.liveliness().declare_token(P.liveliness_key(robot_id, "hal")),
         ]
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:
@@ -116,27 +120,39 @@ class FakeHal:
             return None
         return (self._t_recv - t0) / 1e3
 
-    def series(self, n: int, rate_hz: float | None) -> tuple[np.ndarray, int]:
-        """n round trips back-to-back (rate None) or at ``rate_hz``; (µs array, lost count)."""
-        out, lost = [], 0
-        period = 1.0 / rate_hz if rate_hz else 0.0
-        t_next = time.perf_counter()
-        gc.disable()
-        try:
-            for _ in range(n):
-                if period:
-                    t_next += period
+    def alive(self) -> bool:
+        """True once the peer's liveliness token is seen."""
+        return any(r.ok is not None for r in self.session.liveliness().get(
+            P.liveliness_key(self.robot_id, "policy"), timeout=1.0))
+
+
+def interleaved(hals: list[FakeHal], n: int, rate_hz: float | None) -> list[tuple[np.ndarray, int]]:
+    """n round trips per peer, the peers taking turns (the order swapped every round), so that
+    every peer is measured under the same machine conditions; back-to-back (rate None) or
+    each peer at ``rate_hz`` (its turns evenly spaced between the others'). Per peer:
+    (µs array, lost count)."""
+    out: list[list[float]] = [[] for _ in hals]
+    lost = [0] * len(hals)
+    slot = 1.0 / rate_hz / len(hals) if rate_hz else 0.0
+    t_next = time.perf_counter()
+    gc.disable()
+    try:
+        for i in range(n):
+            order = range(len(hals)) if i % 2 == 0 else reversed(range(len(hals)))
+            for j in order:
+                if slot:
+                    t_next += slot
                     delay = t_next - time.perf_counter()
                     if delay > 0:
                         time.sleep(delay)
-                rtt = self.round_trip()
+                rtt = hals[j].round_trip()
                 if rtt is None:
-                    lost += 1
+                    lost[j] += 1
                 else:
-                    out.append(rtt)
-        finally:
-            gc.enable()
-        return np.array(out), lost
+                    out[j].append(rtt)
+    finally:
+        gc.enable()
+    return [(np.array(o), k) for o, k in zip(out, lost)]
 
 
 def stats(a: np.ndarray) -> dict[str, float]:
@@ -166,29 +182,14 @@ def handle_cost(policy: Path, n: int = 300) -> dict[str, float]:
     return out
 
 
-def run_peer(hal: FakeHal, proc: Proc, n: int, paced: int, label: str) -> dict[str, tuple[dict, int]]:
-    """Wait for the peer's liveliness, warm up, measure both series, stop the peer."""
-    ok = wait_until(lambda: any(r.ok is not None for r in hal.session.liveliness().get(
-        P.liveliness_key(ROBOT_ID, "policy"), timeout=1.0)) or not proc.alive(), 60.0, 0.2)
-    if not ok or not proc.alive():
-        raise SystemExit(f"{label} did not come up:\n{proc.output()}")
-    hal.series(300, None)                                   # warm-up (JIT-free, but caches, sockets)
-    res = {}
-    for name, count, rate in (("back-to-back", n, None), ("100 Hz", paced, 100.0)):
-        a, lost = hal.series(count, rate)
-        res[name] = (stats(a), lost)
-    proc.stop()
-    res["log"] = proc.output()
-    proc.close()
-    return res
-
-
 def main() -> None:
     """Run both measurements and print the table."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policy", help="policy .pt (default policies/pupper_trot.pt, else an untrained export)")
     p.add_argument("--n", type=int, default=3000, help="back-to-back round trips per peer")
     p.add_argument("--paced", type=int, default=1000, help="round trips at 100 Hz per peer")
+    p.add_argument("--serve-arg", action="append", default=[], help="extra argument for the policy server "
+                   "(repeatable), e.g. --serve-arg=--threads=2")
     p.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.echo:
@@ -203,14 +204,29 @@ def main() -> None:
     print(f"policy {policy} ({'trained' if trained else 'untrained export'}), {os.cpu_count()} CPUs, "
           f"load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
     with zenoh.open(load_config("peer", listen=[ep])) as session:
-        hal = FakeHal(session, spec)
-        server = Proc("virl_quad.deploy.serve", ["--policy", str(policy), "--robot-id", ROBOT_ID,
-                                                  "--connect", ep], "serve")
-        res_srv = run_peer(hal, server, args.n, args.paced, "the policy server")
-        raw = Proc("bench.serve_latency", ["--echo", ep], "echo")
-        res_raw = run_peer(hal, raw, args.n, args.paced, "the raw echo")
-        for e in reversed(hal.entities):
-            e.undeclare()
+        hals = [FakeHal(session, spec, ROBOT_ID), FakeHal(session, spec, ECHO_ID)]
+        procs = [Proc("virl_quad.deploy.serve", ["--policy", str(policy), "--robot-id", ROBOT_ID,
+                                                 "--connect", ep, *args.serve_arg], "serve"),
+                 Proc("bench.serve_latency", ["--echo", ep], "echo")]
+        try:
+            for hal, proc, label in zip(hals, procs, ("the policy server", "the raw echo")):
+                if not wait_until(lambda: hal.alive() or not proc.alive(), 60.0, 0.2) or not proc.alive():
+                    raise SystemExit(f"{label} did not come up:\n{proc.output()}")
+            interleaved(hals, 300, None)                      # warm-up (caches, sockets)
+            res_srv: dict = {}
+            res_raw: dict = {}
+            for name, count, rate in (("back-to-back", args.n, None), ("100 Hz", args.paced, 100.0)):
+                (a_srv, l_srv), (a_raw, l_raw) = interleaved(hals, count, rate)
+                res_srv[name], res_raw[name] = (stats(a_srv), l_srv), (stats(a_raw), l_raw)
+            for proc, res in zip(procs, (res_srv, res_raw)):
+                proc.stop()
+                res["log"] = proc.output()
+        finally:
+            for proc in procs:
+                proc.close()
+            for hal in hals:
+                for e in reversed(hal.entities):
+                    e.undeclare()
         session.close()
     cost = handle_cost(policy)
     load1 = os.getloadavg()
@@ -223,7 +239,7 @@ def main() -> None:
         r = res_srv[mode][0]["median"] / res_raw[mode][0]["median"]
         print(f"median ratio server / raw ({mode}): {r:.2f}  (goal <= 1.5)")
     for label, res in (("policy server", res_srv), ("raw echo", res_raw)):
-        work = [ln.split("; ")[-1] for ln in res["log"].splitlines() if "compute per command" in ln]
+        work = [part for ln in res["log"].splitlines() for part in ln.split("; ") if "compute per command" in part]
         print(f"{label}'s own time, state received -> command published (last 4096): "
               f"{work[-1] if work else 'not reported'}")
     print("PolicyRunner.handle in this process, median µs: "
