@@ -73,11 +73,10 @@ class NumpyMLP:
         for i, (w, b) in enumerate(self.layers):
             h = h @ w
             h += b                                   # in place: one temporary array fewer per layer
-            if i < last:                             # ELU (alpha 1): max(h, 0) + expm1(min(h, 0))
+            if i < last:                             # ELU (alpha 1) = max(h, expm1(min(h, 0))), as e^h - 1 >= h
                 neg = np.minimum(h, 0)
                 np.expm1(neg, out=neg)
-                np.maximum(h, 0, out=h)
-                h += neg
+                np.maximum(h, neg, out=h)
         return h
 
 
