@@ -60,7 +60,7 @@ def test_tiny_distillation_exports_a_loadable_policy(tmp_path: Path) -> None:
 
 
 def test_cli_bad_input_is_one_line_exit_2(tmp_path: Path) -> None:
-    for bad in (["--robot", "spot"], ["--rounds", "0"]):
+    for bad in (["--robot", "spot"], ["--rounds", "0"], ["--randomize", "--max-latency", "-1"]):
         r = subprocess.run([sys.executable, "-m", "virl_quad.distill", *bad, "--out", str(tmp_path / "x.pt")],
                            cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert r.returncode == 2, r.stderr
