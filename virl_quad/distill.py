@@ -16,7 +16,7 @@ everything gathered (mean-squared error, the observation normaliser set to the d
 and standard deviation). Half the episodes start from the default pose at phase 0 (as a
 HAL does), half by reference state initialisation at a random phase (as training does).
 
-Three choices make the student learnable:
+Four choices make the student learnable and sturdier:
 - the teacher feeds back the joint angles of the observation (what the student measures),
   not the simulator's true ones, so a label is a function of the observation;
 - the student is blind to the last-action input (first-layer weights held at zero): the
@@ -25,7 +25,11 @@ Three choices make the student learnable:
 - no domain randomisation by default: with it (observation latency up to 40 ms) held-out
   error was 100x higher and the observation-fed tracker itself fell in 1 of 3 episodes;
   with the latency held at 0 (``--randomize --max-latency 0``) the student still got worse
-  round by round (mean travel +0.78 m in round 2, -0.45 m in round 5).
+  round by round (mean travel +0.78 m in round 2, -0.45 m in round 5);
+- Gaussian noise (std 0.1 action units) on every executed action while gathering: the
+  student sees states off the teacher's path. Under the training's domain randomisation it
+  fell in 5 of 30 evaluation episodes, against 14 of 30 for the same recipe without noise,
+  at a lower score on the nominal robot (1.24x the default pose against 1.68x).
 """
 
 from __future__ import annotations
@@ -63,7 +67,7 @@ class DistillArgs:
     gain: float = DEFAULT_GAIN              # tracker feedback gain on the joint error
     lead: float = DEFAULT_LEAD              # s the tracker's feed-forward reference runs ahead
     blind_last_action: bool = True          # the student ignores the last-action input (no copying the teacher's last action)
-    noise: float = 0.0                      # std of Gaussian noise on the executed action (action units), for robustness
+    noise: float = 0.1                      # std of Gaussian noise on the executed action (action units): wider states, fewer falls
     randomize: bool = False                 # domain randomisation while gathering (off: the nominal robot, as the sim HAL)
     max_latency: float = 0.04               # s, largest observation delay drawn with --randomize (training's 0.04)
     seed: int = 0                           # random seed
