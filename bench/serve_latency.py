@@ -185,7 +185,7 @@ def handle_cost(policy: Path, n: int = 300) -> dict[str, float]:
 def main() -> None:
     """Run both measurements and print the table."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", help="policy .pt (default policies/pupper_trot.pt, else an untrained export)")
+    p.add_argument("--policy", help="policy .pt (default: the policy server's default, else an untrained export)")
     p.add_argument("--n", type=int, default=3000, help="back-to-back round trips per peer")
     p.add_argument("--paced", type=int, default=1000, help="round trips at 100 Hz per peer")
     p.add_argument("--serve-arg", action="append", default=[], help="extra argument for the policy server "
@@ -198,10 +198,10 @@ def main() -> None:
     zenoh.init_log_from_env_or("error")
     spec = robots.get("pupper")
     tmp = tempfile.mkdtemp(prefix="virl_bench_")
-    policy, trained = (Path(args.policy), True) if args.policy else policy_for_tests(tmp)
+    policy, shipped = (Path(args.policy), True) if args.policy else policy_for_tests(tmp)
     ep = f"tcp/127.0.0.1:{free_port()}"
     load0 = os.getloadavg()
-    print(f"policy {policy} ({'trained' if trained else 'untrained export'}), {os.cpu_count()} CPUs, "
+    print(f"policy {policy} ({'given or shipped' if shipped else 'untrained export'}), {os.cpu_count()} CPUs, "
           f"load average {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
     with zenoh.open(load_config("peer", listen=[ep])) as session:
         hals = [FakeHal(session, spec, ROBOT_ID), FakeHal(session, spec, ECHO_ID)]
