@@ -49,6 +49,7 @@ from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
 from virl_quad.demo.tracker import DEFAULT_GAIN, DEFAULT_LEAD, tracker_action
+from virl_quad.envs.observation import policy_block
 
 
 @dataclass
@@ -84,7 +85,7 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
     """Run ``steps`` control steps, executing the tracker with probability ``beta`` (else the
     student), and return the observations, the tracker's (clipped) actions and statistics."""
     obs_out, act_out, travel, falls, episodes = [], [], [], 0, 0
-    q_cols = block_columns("joint_pos_minus_default")
+    q_cols = policy_block("joint_pos_minus_default")
     k = first_episode
     while len(obs_out) < steps:
         env = envs_pair[k % 2]
@@ -114,22 +115,10 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
             {"episodes": episodes, "falls": falls, "travel_m": float(np.mean(travel)), "next_episode": k})
 
 
-def block_columns(block: str) -> list[int]:
-    """Columns of one named block of the policy observation (with the demonstration phase)."""
-    from virl_quad.envs.observation import policy_layout
-
-    start = 0
-    for name, size, _ in policy_layout(with_phase=True):
-        if name == block:
-            return list(range(start, start + size))
-        start += size
-    raise KeyError(block)
-
-
-def blind_to(actor: torch.nn.Module, block: str) -> list[int]:
+def blind_to(actor: torch.nn.Module, block: str) -> slice:
     """Zero (and keep at zero) the first layer's weights on one observation block, so the
     policy ignores that input; returns the blocked input columns."""
-    cols = block_columns(block)
+    cols = policy_block(block)
     first = next(m for m in actor.mlp.modules() if isinstance(m, torch.nn.Linear))
     with torch.no_grad():
         first.weight[:, cols] = 0.0

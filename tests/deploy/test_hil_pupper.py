@@ -158,6 +158,7 @@ def _env_run(path) -> tuple[float, bool]:
     standing in the default pose at demonstration phase 0, no randomisation."""
     from virl_quad import demo as demo_lib
     from virl_quad import envs
+    from virl_quad.demo.score import record_episode
     from virl_quad.policy_io import load_policy
 
     policy = load_policy(path)
@@ -165,13 +166,10 @@ def _env_run(path) -> tuple[float, bool]:
                     episode_seconds=DRIVE_SECONDS)
     try:
         obs, _ = env.reset(seed=0, options={"demo_step": 0})
-        x0, done, fell = float(env.unwrapped.state.base_pos[0]), False, False
-        while not done:
-            obs, _, fell, done, _ = env.step(policy.act(obs["policy"]))
-            done = done or fell
-        return float(env.unwrapped.state.base_pos[0]) - x0, bool(fell)
+        traj, _, fell = record_episode(env, lambda o: policy.act(o["policy"]), obs)
     finally:
         env.close()
+    return float(traj.root_pos[-1, 0] - traj.root_pos[0, 0]), fell
 
 
 def test_shipped_policy_moves_forward_as_in_the_training_env(drive, policy):

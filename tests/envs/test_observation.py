@@ -30,3 +30,16 @@ def test_non_finite_input_is_refused(block: str, value: float) -> None:
     args[block][1] = 3.0e4   # large but finite: accepted
     obs = O.policy_observation(spec, [0, 0, 0, 1.0], args["gyro"], args["q"], args["dq"], args["act"], 0.25)
     assert obs.dtype == np.float32 and obs.shape == (O.policy_size(True),) and np.all(np.isfinite(obs))
+
+
+def test_policy_block_finds_each_block_in_the_built_observation():
+    policy_block, policy_observation = O.policy_block, O.policy_observation
+    spec = robots.get("pupper")
+    q = np.asarray(spec.default_pose) + np.linspace(-0.3, 0.3, 12)
+    last = np.linspace(-1.0, 1.0, 12)
+    obs = policy_observation(spec, np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), q, np.zeros(12), last, 0.25)
+    np.testing.assert_allclose(obs[policy_block("joint_pos_minus_default")], q - spec.default_pose, atol=1e-6)
+    np.testing.assert_allclose(obs[policy_block("last_action")], last, atol=1e-6)
+    np.testing.assert_allclose(obs[policy_block("demo_phase_sin_cos")], [1.0, 0.0], atol=1e-6)
+    with pytest.raises(KeyError):
+        policy_block("demo_phase_sin_cos", with_phase=False)

@@ -44,6 +44,16 @@ def policy_layout(with_phase: bool) -> list[tuple[str, int, float]]:
     return layout
 
 
+def policy_block(name: str, with_phase: bool = True) -> slice:
+    """Where the block ``name`` of :func:`policy_layout` lies in the policy observation."""
+    start = 0
+    for block, size, _ in policy_layout(with_phase):
+        if block == name:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(f"no block {name!r} in the policy observation")
+
+
 _INPUT_SIZES = [4, 3, 12, 12, 12]  # quat xyzw, gyro, q, dq, last action
 
 
