@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -211,6 +212,9 @@ def load_policy(path: str | Path, robot: str | None = None, numpy_fast_path: boo
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"policy file {path} does not exist")
+    if not zipfile.is_zipfile(path):   # every TorchScript archive is a zip: say so before asking for metadata
+        raise ValueError(f"{path} is not a TorchScript policy (not a zip archive; export one with "
+                         "python -m virl_quad.export)")
     meta_file = metadata_path(path)
     if not meta_file.is_file():
         raise ValueError(f"policy metadata {meta_file} does not exist")

@@ -321,6 +321,9 @@ def test_cli_bad_input_is_one_line_exit_2(policy, tmp_path, rig_factory):
     fake.write_bytes(b"not a torchscript archive")
     fake.with_suffix(".json").write_text(path.with_suffix(".json").read_text())
     _one_line_error(*_run(serve, "--policy", str(fake)), "not a TorchScript policy")
+    notes = tmp_path / "notes.md"              # a file of another type, no metadata beside it
+    notes.write_text("# not a policy\n")
+    _one_line_error(*_run(serve, "--policy", str(notes)), "not a TorchScript policy")
     # a Laikago policy against a running Pupper HAL: refused after the announce
     laikago = export_untrained(tmp_path, "laikago")
     rig = rig_factory()

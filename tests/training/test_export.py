@@ -71,6 +71,10 @@ def test_not_torchscript_and_missing(tmp_path: Path) -> None:
         load_policy(path)
     with pytest.raises(ValueError, match="does not exist"):
         load_policy(tmp_path / "none.pt")
+    text = tmp_path / "notes.md"               # any other file, with no metadata beside it
+    text.write_text("# not a policy\n")
+    with pytest.raises(ValueError, match="notes.md is not a TorchScript policy"):
+        load_policy(text)
 
 
 def test_policy_rejects_nan_observation(tmp_path: Path) -> None:
