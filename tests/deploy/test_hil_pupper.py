@@ -116,18 +116,18 @@ def drive(policy, tmp_path_factory):
     return dict(np.load(rec)), n, shipped, st, logs
 
 
-def _window(data: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _window(data: dict, n: int, logs: str) -> tuple[np.ndarray, np.ndarray]:
     """(mode name per tick, the n + 1 ticks from the first ACTIVE one)."""
     modes = [str(m) for m in data["modes"]]
     mode = np.array([modes[i] for i in data["mode"]])
     active = np.flatnonzero(mode == "ACTIVE")
-    assert active.size >= n, f"only {active.size} ACTIVE ticks recorded"
+    assert active.size >= n, f"only {active.size} ACTIVE ticks recorded\n{logs}"
     return mode, np.arange(int(active[0]), int(active[0]) + n + 1)
 
 
 def test_policy_drives_pupper_10_s_safely_and_upright(drive):
     data, n, shipped, status, logs = drive
-    mode, win = _window(data, n)
+    mode, win = _window(data, n, logs)
     assert np.all(mode[win] == "ACTIVE"), f"fault during the run: {status}\n{logs}"
     t = data["t"]
     assert t[win[-1]] - t[win[0]] == pytest.approx(DRIVE_SECONDS, abs=1e-6)    # lock-step: exact sim time
@@ -179,7 +179,7 @@ def test_shipped_policy_moves_forward_as_in_the_training_env(drive, policy):
     if not shipped:
         pytest.skip("no shipped policy in policies/ (see virl_quad.deploy.serve.SHIPPED_POLICIES): the "
                     "'moves forward' check needs one (the pipeline and safety checks ran with an untrained export)")
-    _, win = _window(data, n)
+    _, win = _window(data, n, logs)
     dx = data["base_pos"][win[-1], 0] - data["base_pos"][win[0], 0]
     dx_env, fell = _env_run(policy[0])
     print(f"\nHIL: shipped policy {policy[0].name} moved {dx:+.3f} m in {DRIVE_SECONDS:g} s through HAL + server; "

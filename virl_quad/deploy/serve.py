@@ -271,7 +271,7 @@ class Server:
 
 
 def load(path: str) -> Any:
-    """Load and check a policy; ValueError (one line) for a missing or bad file."""
+    """Load and check a policy; UserError or ValueError (one line) for a missing or bad file."""
     from virl_quad.policy_io import load_policy
 
     if not Path(path).is_file():
