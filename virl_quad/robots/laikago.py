@@ -12,7 +12,22 @@ motion_imitation's motor angles by (0, -0.6, +0.66) rad per leg: the
 
 from __future__ import annotations
 
-from virl_quad.robots.spec import LEGS, RobotSpec, per_leg
+from virl_quad.robots.spec import LEGS, LegGeometry, RobotSpec, per_leg
+
+_FRONT_X, _REAR_X, _HIP_Y, _HIP_Z = 0.199095, -0.238195, 0.0817145, -0.03   # m, abduction joint origins (URDF)
+#: Leg chain at zero joint angles, from the URDF's joint origins expressed in the base frame
+#: (each abduction joint frame is rotated by rpy (pi/2, 0, pi/2): its x is the body y, its y the
+#: body z, its z the body x). The right legs' abduction axis is -x (URDF axis 0 0 -1), the left
+#: legs' +x; hip and knee axes are +y. The right and left legs are not mirror images: the upper
+#: leg sits 0.053565 m out on the right, 0.055855 m on the left, and the knee 0.02069 m back in.
+LEG = LegGeometry(
+    abduction_origin=[[_FRONT_X, -_HIP_Y, _HIP_Z], [_FRONT_X, _HIP_Y, _HIP_Z],
+                      [_REAR_X, -_HIP_Y, _HIP_Z], [_REAR_X, _HIP_Y, _HIP_Z]],                         # m
+    abduction_sign=[-1.0, 1.0, -1.0, 1.0],
+    hip_from_abduction=[[0.0, -0.053565, 0.0], [0.0, 0.055855, 0.0]] * 2,                          # m
+    knee_from_hip=[[-0.1422, 0.02069, -0.20833], [-0.1422, -0.02069, -0.20833]] * 2,               # m
+    foot_from_knee=[[-0.022, 0.0, -0.25]] * 4,                                                       # m (toe)
+)
 
 SPEC = RobotSpec(
     name="laikago",
@@ -48,5 +63,6 @@ SPEC = RobotSpec(
     camera_pitch=-15.0,                                 # deg
     episode_seconds=10.0,
     strip_full_speed=1.6,                               # m/s, twice the built-in trot's speed
+    leg=LEG,
     notes="pybullet_data laikago_toes_zup_lores.urdf; limits from laikago_toes_limits.urdf.",
 )

@@ -2,7 +2,18 @@
 
 from __future__ import annotations
 
-from virl_quad.robots.spec import LEGS, ROBOTS_DIR, RobotSpec, per_leg
+from virl_quad.robots.spec import LEGS, ROBOTS_DIR, LegGeometry, RobotSpec, per_leg
+
+#: Leg chain at zero joint angles (ROBOTS.md; robots/pupper/pupper.urdf): abduction joints at
+#: x +-0.10 m, y +-0.04 m; the upper leg 0.02 m further out; upper leg 0.08 m and lower leg
+#: 0.11 m straight down; all three axes positive (abduction +x, hip and knee +y).
+LEG = LegGeometry(
+    abduction_origin=[[0.10, -0.04, 0.0], [0.10, 0.04, 0.0], [-0.10, -0.04, 0.0], [-0.10, 0.04, 0.0]],  # m
+    abduction_sign=[1.0, 1.0, 1.0, 1.0],
+    hip_from_abduction=[[0.0, -0.02, 0.0], [0.0, 0.02, 0.0], [0.0, -0.02, 0.0], [0.0, 0.02, 0.0]],     # m
+    knee_from_hip=[[0.0, 0.0, -0.08]] * 4,                                                              # m
+    foot_from_knee=[[0.0, 0.0, -0.11]] * 4,                                                             # m
+)
 
 SPEC = RobotSpec(
     name="pupper",
@@ -36,5 +47,6 @@ SPEC = RobotSpec(
     camera_yaw=0.0,                                     # deg: side view from the right, robot walks left to right
     camera_pitch=-15.0,                                 # deg
     strip_full_speed=0.5,                               # m/s, twice the built-in trot's speed
+    leg=LEG,
     notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
 )

@@ -38,6 +38,49 @@ def per_leg(abduction: float, hip: float, knee: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class LegGeometry:
+    """The kinematic chain of the four legs at zero joint angles, in the base frame (m).
+
+    Each leg: an abduction joint whose axis is the body x axis (``abduction_sign`` +1) or
+    its opposite (-1), then a hip and a knee joint whose axes are both the body +y axis,
+    i.e. an abduction joint carrying a planar two-link leg. Positions are the joint
+    origins and the foot frame origin (the foot sphere centre) with every joint at 0 rad;
+    arrays are (4, 3) in the canonical leg order FR, FL, RR, RL. Enough for closed-form
+    leg forward and inverse kinematics (:mod:`virl_quad.policy.legs`), checked against
+    the URDF with Pinocchio in the tests.
+    """
+
+    abduction_origin: np.ndarray    # m (4, 3): abduction joint origin in the base frame
+    abduction_sign: np.ndarray      # (4,) +1: abduction axis along +x, -1: along -x
+    hip_from_abduction: np.ndarray  # m (4, 3): hip joint origin - abduction origin, all joints at 0
+    knee_from_hip: np.ndarray       # m (4, 3): knee joint origin - hip joint origin, all joints at 0
+    foot_from_knee: np.ndarray      # m (4, 3): foot frame origin - knee joint origin, all joints at 0
+
+    def __post_init__(self) -> None:
+        for name in ("abduction_origin", "hip_from_abduction", "knee_from_hip", "foot_from_knee"):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.shape != (4, 3) or not np.all(np.isfinite(a)):
+                raise ValueError(f"LegGeometry.{name} must be finite (4, 3), got shape {a.shape}")
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        sign = np.asarray(self.abduction_sign, dtype=np.float64)
+        if sign.shape != (4,) or not np.all(np.abs(sign) == 1.0):
+            raise ValueError(f"LegGeometry.abduction_sign must be 4 values of +-1, got {sign.tolist()}")
+        sign.setflags(write=False)
+        object.__setattr__(self, "abduction_sign", sign)
+
+    @property
+    def upper_leg_length(self) -> np.ndarray:
+        """m (4,): hip joint to knee joint, in the leg plane."""
+        return np.hypot(self.knee_from_hip[:, 0], self.knee_from_hip[:, 2])
+
+    @property
+    def lower_leg_length(self) -> np.ndarray:
+        """m (4,): knee joint to foot, in the leg plane."""
+        return np.hypot(self.foot_from_knee[:, 0], self.foot_from_knee[:, 2])
+
+
+@dataclass(frozen=True)
 class RobotSpec:
     """Everything the project needs to know about one quadruped.
 
@@ -75,6 +118,7 @@ class RobotSpec:
     camera_pitch: float             # deg, negative looks down
     episode_seconds: float = 10.0   # s, time limit of one training episode
     strip_full_speed: float = 0.5   # m/s drawn as a half-width bar by the speed strip (sim.strip.stamp_speed)
+    leg: LegGeometry | None = None  # leg chain for closed-form leg kinematics (m); None: not described
     notes: str = ""
     extra: dict = field(default_factory=dict)
 
