@@ -1,7 +1,8 @@
-"""virl_quad: quadrupeds that learn to move like a single video (VIRL), sim to real."""
+"""virl_quad: quadrupeds that learn to move like a single video (VIRL), sim to real.
 
-from virl_quad.quiet import import_pybullet_quietly as _import_pybullet_quietly
+Importing the package loads no simulator: PyBullet is imported (quietly, see
+:mod:`virl_quad.quiet`) by the modules that use it, so the robot-side policy server
+(:mod:`virl_quad.deploy.serve`, :mod:`virl_quad.policy`) runs without it.
+"""
 
 __version__ = "0.1.0"
-
-_import_pybullet_quietly()  # its C-level banner would break the one-line error promise of the CLIs

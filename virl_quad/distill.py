@@ -49,7 +49,7 @@ from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
 from virl_quad.demo.tracker import DEFAULT_GAIN, DEFAULT_LEAD, tracker_action
-from virl_quad.envs.observation import policy_block
+from virl_quad.policy.observation import policy_block
 
 
 @dataclass
@@ -115,10 +115,11 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
             {"episodes": episodes, "falls": falls, "travel_m": float(np.mean(travel)), "next_episode": k})
 
 
-def blind_to(actor: torch.nn.Module, block: str) -> slice:
-    """Zero (and keep at zero) the first layer's weights on one observation block, so the
-    policy ignores that input; returns the blocked input columns."""
-    cols = policy_block(block)
+def blind_to(actor: torch.nn.Module, block: str, with_phase: bool = True, action_size: int = 12) -> slice:
+    """Zero (and keep at zero) the first layer's weights on one observation block (of the layout
+    with ``with_phase`` and ``action_size``), so the policy ignores that input; returns the blocked
+    input columns."""
+    cols = policy_block(block, with_phase, action_size)
     first = next(m for m in actor.mlp.modules() if isinstance(m, torch.nn.Linear))
     with torch.no_grad():
         first.weight[:, cols] = 0.0
@@ -168,15 +169,16 @@ def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
     if d.motion is None:
         raise UserError(f"demonstration {args.demo!r} has no reference motion: the tracker needs one")
     hidden = tuple(int(h) for h in args.hidden.split(","))
-    actor = fresh_actor(hidden, seed=args.seed)
-    if args.blind_last_action:
-        # The teacher's previous action predicts its next one almost perfectly, and a student
-        # that learns to copy it drifts on its own (causal confusion): it does not get to see it.
-        blind_to(actor, "last_action")
     rng, gen = np.random.default_rng(args.seed), torch.Generator().manual_seed(args.seed)
     ranges = {"latency": (0.0, args.max_latency)} if args.randomize else None
     pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, randomization=ranges, render=False, rsi=rsi,
                            episode_seconds=10.0) for rsi in (False, True))
+    contract = pair[0].unwrapped.contract
+    actor = fresh_actor(contract, hidden, seed=args.seed)
+    if args.blind_last_action:
+        # The teacher's previous action predicts its next one almost perfectly, and a student
+        # that learns to copy it drifts on its own (causal confusion): it does not get to see it.
+        blind_to(actor, "last_action", contract.with_phase, contract.action_size)
     all_obs, all_act, history, k = [], [], [], 0
     try:
         for r in range(args.rounds):
@@ -200,7 +202,7 @@ def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
     finally:
         for e in pair:
             e.close()
-    return actor, {"demo": d, "rounds": history, "student": final}
+    return actor, {"demo": d, "rounds": history, "student": final, "contract": contract}
 
 
 def main(args: DistillArgs) -> int:
@@ -223,7 +225,7 @@ def main(args: DistillArgs) -> int:
     extra = {"reward": "none (behaviour cloning of the privileged tracker; not VIRL)",
              "distill": dataclasses.asdict(args),
              "distill_rounds": info["rounds"], "distill_student": info["student"]}
-    path = export_actor(actor, args.robot, out, demo_meta, {}, json.loads(json.dumps(extra)))
+    path = export_actor(actor, args.robot, out, info["contract"], demo_meta, {}, json.loads(json.dumps(extra)))
     log(f"wrote {path} (and {path.with_suffix('.json').name}); evaluate it with "
         f"python -m virl_quad.evaluate --policy {path}")
     return 0

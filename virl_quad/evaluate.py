@@ -28,7 +28,7 @@ def policy_callable(policy: LoadedPolicy):
 
 
 def zero_policy(obs: dict) -> np.ndarray:
-    """Hold the default pose."""
+    """Hold the default pose (the baseline; 12 actions: an env without a trajectory generator)."""
     return np.zeros(12)
 
 
@@ -55,13 +55,13 @@ def main(argv: list[str] | None = None) -> int:
     demo = demo_lib.load(source, robot)
     if demo.motion is None:
         raise UserError(f"demonstration {source!r} has no reference motion: the ground-truth score needs one")
-    # the policy's own action mapping (its metadata), whatever the robot spec's default is now
-    actions = {"action_scale": float(policy.meta["action_scale"]), "action_clip": float(policy.meta["action_clip"]),
-               "max_target_step": policy.meta.get("max_target_step")}   # absent: exported before the limit
+    # the policy's own action mapping (its metadata's contract: scale, clip, rate limit, TG),
+    # whatever the robot spec's default is now
+    actions = policy.contract.env_overrides()
     kwargs = dict(episodes=args.episodes, seed=args.seed, episode_seconds=args.seconds,
                   randomize=not args.no_randomize, **actions)
     result = evaluate(policy_callable(policy), robot, demo, **kwargs)
-    baseline = evaluate(zero_policy, robot, demo, **kwargs)
+    baseline = evaluate(zero_policy, robot, demo, **{**kwargs, "tg": None})   # the default pose, not a TG
     keys = [k for k, v in result.items() if isinstance(v, (int, float))]
     print(f"{'figure':28s} {'policy':>10s} {'default pose':>13s}")
     for k in keys:
@@ -69,7 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     if baseline.get("total", 0) > 0:
         print(f"{'score ratio to default pose':28s} {result['total'] / baseline['total']:10.2f}")
     if args.json:
+        tg = policy.contract.tg
         Path(args.json).write_text(json.dumps({"policy": args.policy, "demo": source, **kwargs,
+                                               "tg": None if tg is None else tg.to_dict(),
                                                "result": result, "default_pose": baseline}, indent=2, default=float))
     if args.video:
         from virl_quad.training.report import side_by_side_video

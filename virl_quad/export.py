@@ -19,51 +19,58 @@ from tensordict import TensorDict
 
 from virl_quad import robots
 from virl_quad.cli import UserError, run_main
-from virl_quad.envs import observation as obs_lib
-from virl_quad.envs.quadruped import EnvConfig
+from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy_io import metadata_for, save_policy
 from virl_quad.training import checkpoint
 from virl_quad.training.config import TrainArgs, hidden_sizes, rsl_rl_config
 
 
-def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs]:
-    """Rebuild the rsl-rl actor of a checkpoint (eval mode)."""
-    args = TrainArgs(**data["config"])
-    checkpoint.check_action_facts(data, args.robot)
-    hidden_sizes(args)
-    n = obs_lib.policy_size(with_phase=True)
-    obs = TensorDict({"policy": torch.zeros(1, n)}, batch_size=[1])
+def _actor(contract: PolicyContract, args: TrainArgs) -> MLPModel:
+    """An rsl-rl actor of the training architecture for ``contract``'s observation and action sizes."""
+    obs = TensorDict({"policy": torch.zeros(1, contract.observation_size)}, batch_size=[1])
     cfg = rsl_rl_config(args)["actor"]
     cfg.pop("class_name")
-    actor = MLPModel(obs, {"actor": ["policy"]}, "actor", 12, **cfg)
+    return MLPModel(obs, {"actor": ["policy"]}, "actor", contract.action_size, **cfg)
+
+
+def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs, PolicyContract]:
+    """Rebuild the rsl-rl actor of a checkpoint (eval mode), with the run's options and policy contract."""
+    names = set(TrainArgs.__dataclass_fields__)
+    args = TrainArgs(**{k: v for k, v in data["config"].items() if k in names})
+    contract = checkpoint.contract_of(data, args.robot)
+    hidden_sizes(args)
+    actor = _actor(contract, args)
     try:
         actor.load_state_dict(data["actor_state_dict"])
     except RuntimeError as exc:
         raise UserError(f"checkpoint actor does not match its config ({str(exc).splitlines()[0][:100]})") from None
-    return actor.eval(), args
+    return actor.eval(), args, contract
 
 
-def fresh_actor(hidden: list[int] | tuple[int, ...] = (256, 128), seed: int = 0) -> MLPModel:
-    """An untrained actor with the training architecture (for tests and dry runs)."""
+def default_contract(robot: str, demo_frames: int | None = None, tg=None) -> PolicyContract:
+    """The contract of ``virl_quad.envs.make(robot, tg=tg)`` with a demonstration of ``demo_frames``
+    frames (None: none): the env's defaults, for untrained policies in tests and dry runs."""
+    from virl_quad.envs import EnvConfig, policy_contract
+
+    return policy_contract(robots.get(robot), EnvConfig(tg=tg), demo_frames)
+
+
+def fresh_actor(contract: PolicyContract, hidden: list[int] | tuple[int, ...] = (256, 128), seed: int = 0) -> MLPModel:
+    """An untrained actor with the training architecture for ``contract`` (for tests and dry runs)."""
     torch.manual_seed(seed)
-    args = TrainArgs(hidden=",".join(str(h) for h in hidden))
-    obs = TensorDict({"policy": torch.zeros(1, obs_lib.policy_size(with_phase=True))}, batch_size=[1])
-    cfg = rsl_rl_config(args)["actor"]
-    cfg.pop("class_name")
-    return MLPModel(obs, {"actor": ["policy"]}, "actor", 12, **cfg).eval()
+    return _actor(contract, TrainArgs(hidden=",".join(str(h) for h in hidden))).eval()
 
 
-def export_actor(actor: MLPModel, robot: str, out: str | Path, demo: dict | None = None,
+def export_actor(actor: MLPModel, robot: str, out: str | Path, contract: PolicyContract, demo: dict | None = None,
                  scores: dict | None = None, extra: dict | None = None, onnx: bool = False) -> Path:
-    """Script ``actor`` and write ``out`` (.pt) with its metadata (and ONNX on request)."""
+    """Script ``actor`` and write ``out`` (.pt) with its metadata (``contract``: how the actor was
+    trained to act and what it observes; ONNX on request)."""
     out = Path(out)
     if out.suffix != ".pt":
         raise UserError(f"--out must end in .pt, got {out}")
     spec = robots.get(robot)
     scripted = torch.jit.script(actor.as_jit())
-    meta = metadata_for(spec, with_phase=True, action_scale=spec.action_scale,
-                        action_clip=EnvConfig().action_clip, demo=demo, scores=scores,
-                        max_target_step=EnvConfig().max_target_step)
+    meta = metadata_for(spec, contract, demo=demo, scores=scores)
     meta.update(extra or {})
     save_policy(scripted, meta, out)
     if onnx:
@@ -75,7 +82,7 @@ def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
     """Export the run in ``run_dir`` to ``out`` (``.pt``); returns the path written."""
     run_dir = Path(run_dir)
     data = checkpoint.load(run_dir)
-    actor, args = actor_from_checkpoint(data)
+    actor, args, contract = actor_from_checkpoint(data)
     report = run_dir / "report.json"
     scores = json.loads(report.read_text()).get("evaluation", {}) if report.exists() else {}
     demo_meta = {"source": args.demo}
@@ -87,7 +94,7 @@ def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
         demo_meta.update({"source": d.source or args.demo, "robot": d.robot, "fps": d.fps,
                           "num_frames": d.num_frames, "has_motion": d.motion is not None})
     extra = {"reward": args.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])}
-    return export_actor(actor, args.robot, out, demo_meta, scores, extra, onnx)
+    return export_actor(actor, args.robot, out, contract, demo_meta, scores, extra, onnx)
 
 
 def _export_onnx(actor: MLPModel, path: Path) -> None:

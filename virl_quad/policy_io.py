@@ -1,12 +1,14 @@
 """The exported policy format: ``NAME.pt`` (TorchScript) + ``NAME.json`` (metadata), and its loader.
 
 The TorchScript module maps the policy observation (float32 [B, n], built by
-:func:`virl_quad.envs.observation.policy_observation`) to the deterministic
-mean action [B, 12]; the observation normaliser is baked in. The metadata
-says everything a robot needs to use it safely (robot, joint order, default
-pose, action scale, control period, PD gains, observation layout) and where
-it came from (demonstration, scores, project version). :func:`load_policy`
-refuses a policy whose metadata does not match the robot spec.
+:func:`virl_quad.policy.observation.policy_observation`) to the deterministic
+mean action [B, 12] (or [B, 14] with a trajectory generator); the observation
+normaliser is baked in. The metadata says everything a robot needs to use it
+safely (robot, joint order, default pose, control period, PD gains, and the policy
+contract: action scale, clip and rate limit, trajectory generator, phase clock,
+observation layout) and where it came from (demonstration, scores, project
+version). :func:`load_policy` refuses a policy whose metadata does not match the
+robot spec or whose contract this version cannot honour.
 """
 
 from __future__ import annotations
@@ -21,32 +23,24 @@ import numpy as np
 import torch
 
 from virl_quad import __version__, robots
-from virl_quad.envs import observation as obs_lib
+from virl_quad.policy.contract import PolicyContract
 from virl_quad.robots.spec import RobotSpec
 
-FORMAT = "virl_quad.policy/1"
+#: /2: heading in the observation, the contract's action size, trajectory generator and phase clock
+FORMAT = "virl_quad.policy/2"
 
 
-def metadata_for(spec: RobotSpec, with_phase: bool, action_scale: float, action_clip: float,
-                 demo: dict | None, scores: dict | None, max_target_step: float | None = None) -> dict:
-    """The metadata dict of a policy for ``spec``."""
+def metadata_for(spec: RobotSpec, contract: PolicyContract, demo: dict | None, scores: dict | None) -> dict:
+    """The metadata dict of a policy for ``spec`` with ``contract`` (action and observation facts)."""
     return {
         "format": FORMAT,
         "project_version": __version__,
         "robot": spec.name,
         "joint_names": list(spec.joint_names),
         "default_pose": spec.default_pose.tolist(),         # rad
-        "action_scale": action_scale,                       # rad per unit action
-        "action_clip": action_clip,                         # |a| clipped to this before scaling
-        "max_target_step": max_target_step,                 # rad per control period (None: unlimited)
-        "control_dt": spec.control_dt,                      # s
+        **contract.to_metadata(),                           # action scale, clip, rate limit, TG, clock, layout
         "kp": spec.kp.tolist(), "kd": spec.kd.tolist(),     # N·m/rad, N·m·s/rad
         "torque_limit": spec.torque_limit.tolist(),         # N·m
-        "observation": {
-            "size": obs_lib.policy_size(with_phase),
-            "with_phase": with_phase,
-            "layout": [{"name": n, "size": k, "scale": s} for n, k, s in obs_lib.policy_layout(with_phase)],
-        },
         "demo": demo or {},
         "scores": scores or {},
     }
@@ -136,23 +130,16 @@ class LoadedPolicy:
     module: torch.jit.ScriptModule
     meta: dict
     spec: RobotSpec
+    contract: PolicyContract
     fast: NumpyMLP | None = None
 
     def __post_init__(self) -> None:
-        self.obs_size = int(self.meta["observation"]["size"])   # entries of the policy observation
-
-    @property
-    def with_phase(self) -> bool:
-        """Whether the observation carries the demonstration phase."""
-        return bool(self.meta["observation"]["with_phase"])
-
-    @property
-    def demo_frames(self) -> int:
-        """Length of the demonstration cycle in control steps (phase = step % frames / frames)."""
-        return int(self.meta.get("demo", {}).get("num_frames", 0))
+        self.obs_size = self.contract.observation_size       # entries of the policy observation
+        self.action_size = self.contract.action_size         # entries of an action (12, or 14 with a TG)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Action (12,) for one policy observation (n,); ValueError on NaN/inf or a wrong size."""
+        """Action (12 or 14,) for one policy observation (n,); ValueError on NaN/inf or a wrong size.
+        Map it to joint targets with :class:`virl_quad.policy.ActionMap` (``self.contract``)."""
         x = np.asarray(obs, dtype=np.float32).reshape(-1)
         if x.shape[0] != self.obs_size:
             raise ValueError(f"observation has {x.shape[0]} entries, policy expects {self.meta['observation']['size']}")
@@ -167,18 +154,10 @@ class LoadedPolicy:
             raise ValueError("policy produced NaN or inf")
         return a
 
-    def joint_targets(self, action: np.ndarray) -> np.ndarray:
-        """PD targets (rad) for an action, as in training: default + scale * clip(a), within joint limits."""
-        return self.spec.clip_to_limits(self.spec.default_pose + self.meta["action_scale"] * self.clip_action(action))
 
-    def clip_action(self, action: np.ndarray) -> np.ndarray:
-        """The action clipped to +-action_clip, as training applies and observes it."""
-        c = self.meta["action_clip"]
-        return np.minimum(np.maximum(action, -c), c)   # np.clip, 3x faster for 12 values
-
-
-def check_metadata(meta: dict, spec: RobotSpec) -> None:
-    """Raise ValueError naming the first field where ``meta`` disagrees with ``spec``."""
+def check_metadata(meta: dict, spec: RobotSpec) -> PolicyContract:
+    """The policy's contract; ValueError naming the first field where ``meta`` disagrees with ``spec``
+    or with this version (see :meth:`PolicyContract.from_metadata`)."""
     if meta.get("format") != FORMAT:
         raise ValueError(f"policy metadata format is {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("robot") != spec.name:
@@ -190,13 +169,7 @@ def check_metadata(meta: dict, spec: RobotSpec) -> None:
         got = np.asarray(meta.get(key, []), dtype=np.float64)
         if got.shape != want.shape or not np.allclose(got, want, atol=1e-6):
             raise ValueError(f"policy {key} {got.tolist()} differs from {spec.name}'s {want.tolist()}")
-    if abs(float(meta.get("control_dt", -1)) - spec.control_dt) > 1e-9:
-        raise ValueError(f"policy control period {meta.get('control_dt')} s differs from {spec.name}'s "
-                         f"{spec.control_dt} s")
-    obs = meta.get("observation", {})
-    want_layout = [{"name": n, "size": k, "scale": s} for n, k, s in obs_lib.policy_layout(bool(obs.get("with_phase")))]
-    if obs.get("layout") != want_layout:
-        raise ValueError("policy observation layout differs from this version's observation builder")
+    return PolicyContract.from_metadata(meta, spec)
 
 
 def metadata_path(policy_path: str | Path) -> Path:
@@ -223,18 +196,23 @@ def load_policy(path: str | Path, robot: str | None = None, numpy_fast_path: boo
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"policy metadata {meta_file} is not valid JSON ({exc})") from None
     spec = robots.get(robot or meta.get("robot", ""))
-    check_metadata(meta, spec)
+    contract = check_metadata(meta, spec)
     try:
         module = torch.jit.load(str(path), map_location="cpu")
     except Exception as exc:
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise ValueError(f"{path} is not a TorchScript policy ({first[:100]})") from None
     module.eval()
-    fast = fast_path(module, int(meta["observation"]["size"])) if numpy_fast_path else None
-    policy = LoadedPolicy(module, meta, spec, fast)
-    probe = policy.act(np.zeros(meta["observation"]["size"], np.float32))
-    if probe.shape != (12,):
-        raise ValueError(f"{path} outputs {probe.shape[0]} actions, expected 12")
+    fast = fast_path(module, contract.observation_size) if numpy_fast_path else None
+    policy = LoadedPolicy(module, meta, spec, contract, fast)
+    try:
+        probe = policy.act(np.zeros(contract.observation_size, np.float32))
+    except RuntimeError as exc:   # the module takes another input size than the metadata says
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"{path} does not take its metadata's {contract.observation_size} observations "
+                         f"({first[:100]})") from None
+    if probe.shape != (contract.action_size,):
+        raise ValueError(f"{path} outputs {probe.shape[0]} actions, its metadata says {contract.action_size}")
     return policy
 
 

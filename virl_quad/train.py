@@ -41,7 +41,7 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 #: Options added after runs were made, with the value that reproduces those runs on resume.
 LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0,
-                              "reward_warmup": 0}
+                              "reward_warmup": 0, "tg": False}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
@@ -51,7 +51,7 @@ def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict
         if not run_dir.is_dir():
             raise UserError(f"resume folder {run_dir} does not exist")
         data = checkpoint.load(run_dir)
-        checkpoint.check_action_facts(data, data["config"]["robot"])
+        checkpoint.contract_of(data, data["config"]["robot"])   # ValueError when it cannot continue
         names = {f.name for f in dataclasses.fields(TrainArgs)}
         saved = TrainArgs(**{**LEGACY, **{k: v for k, v in data["config"].items() if k in names}})
         args = dataclasses.replace(saved, **{k: getattr(args, k) for k in explicit if k not in ("resume", "run_dir")},
@@ -148,6 +148,25 @@ def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     return out
 
 
+def _action_options(args: TrainArgs, demo, resume_data: dict | None) -> dict:
+    """The env options that define the policy's actions: a resumed run's own (its checkpoint's
+    contract), else the robot's defaults with ``--tg``'s trajectory generator (fitted to the
+    demonstration's reference motion, else the built-in gait of its name)."""
+    if resume_data is not None:
+        return checkpoint.contract_of(resume_data, args.robot).env_overrides()
+    if not args.tg:
+        return {}
+    from virl_quad import robots
+    from virl_quad.training.prior import tg_for_demo
+
+    try:
+        tg, report = tg_for_demo(demo, robots.get(args.robot), args.demo)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    print(f"trajectory generator: {report}", flush=True)
+    return {"tg": tg}
+
+
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
     from virl_quad.demo.score import evaluate
@@ -161,11 +180,12 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         raise UserError("--reward oracle needs a demonstration with a reference motion (a gait or motion file)")
     it0 = int(resume_data["iteration"]) if resume_data else 0
     workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
+    actions = _action_options(args, demo, resume_data)
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
                           oracle_reward=oracle, ground=args.ground, render=not oracle,   # oracle: no frames needed
-                          speed_strip=args.speed_strip)
+                          speed_strip=args.speed_strip, **actions)
     source = EnvReward() if oracle else LearnedReward(args.reward, _frames(demo, args), args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
                                                       lr=args.reward_lr, cyclic=demo.loop,
@@ -179,7 +199,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
 
     def evaluator(policy):
         return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                        episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground)
+                        episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground,
+                        **env.contract.env_overrides())
 
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args), evaluate=evaluator,
                         device=args.device)
@@ -230,15 +251,16 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
 
     print("final evaluation ...", flush=True)
     policy = actor_policy(runner.alg.get_policy().eval())
+    actions = runner.env.contract.env_overrides()          # the run's own action facts (TG included)
     final = evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                     episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground)
+                     episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground, **actions)
     report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
               "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final}
     write_report(run_dir / "report.json", report)
     print(f"report: {run_dir / 'report.json'} (score {final.get('total', float('nan')):.3f}, "
           f"survival {final.get('survival_fraction', float('nan')):.2f})", flush=True)
     if args.video:
-        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground)
+        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground, **actions)
         print(f"video: {out}", flush=True)
 
 

@@ -1,4 +1,4 @@
-"""The one observation builder: closed-form gravity, NaN/inf rejection, layout."""
+"""The one observation builder: closed-form gravity, heading, NaN/inf rejection, layout."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
-from virl_quad.envs import observation as O
+from virl_quad.policy import observation as O
 
 
 def test_projected_gravity_is_gravity_in_the_body_frame() -> None:
@@ -40,6 +40,32 @@ def test_policy_block_finds_each_block_in_the_built_observation():
     obs = policy_observation(spec, np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), q, np.zeros(12), last, 0.25)
     np.testing.assert_allclose(obs[policy_block("joint_pos_minus_default")], q - spec.default_pose, atol=1e-6)
     np.testing.assert_allclose(obs[policy_block("last_action")], last, atol=1e-6)
-    np.testing.assert_allclose(obs[policy_block("demo_phase_sin_cos")], [1.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(obs[policy_block("phase_sin_cos")], [1.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(obs[policy_block("heading_sin_cos")], [0.0, 1.0], atol=1e-6)
     with pytest.raises(KeyError):
-        policy_block("demo_phase_sin_cos", with_phase=False)
+        policy_block("phase_sin_cos", with_phase=False)
+    # with a trajectory generator the last action has 14 entries, and the phase follows it
+    last14 = np.linspace(-1.0, 1.0, 14)
+    obs = policy_observation(spec, np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), q, np.zeros(12), last14, 0.5)
+    assert obs.shape == (O.policy_size(True, 14),) == (48,)
+    np.testing.assert_allclose(obs[policy_block("last_action", True, 14)], last14, atol=1e-6)
+    np.testing.assert_allclose(obs[policy_block("phase_sin_cos", True, 14)], [0.0, -1.0], atol=1e-6)
+    with pytest.raises(ValueError, match="sizes"):
+        policy_observation(spec, np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), q, np.zeros(12), np.zeros(13))
+
+
+def test_heading_is_the_yaw_relative_to_the_start() -> None:
+    spec = robots.get("pupper")
+    cols = O.policy_block("heading_sin_cos", with_phase=False)
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        roll, pitch, yaw, start = rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(-np.pi, np.pi), \
+            rng.uniform(-np.pi, np.pi)
+        quat = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()   # z-y-x: yaw, then pitch, roll
+        assert O.yaw(quat) == pytest.approx(yaw, abs=1e-9)
+        obs = O.policy_observation(spec, quat, np.zeros(3), spec.default_pose, np.zeros(12), np.zeros(12), None,
+                                   start)
+        np.testing.assert_allclose(obs[cols], [np.sin(yaw - start), np.cos(yaw - start)], atol=1e-6)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        O.policy_observation(spec, [0, 0, 0, 1.0], np.zeros(3), spec.default_pose, np.zeros(12), np.zeros(12),
+                             None, float("inf"))

@@ -35,10 +35,11 @@ def test_gathered_pairs_are_the_tracker_and_the_fit_learns_them() -> None:
     finally:
         for e in pair:
             e.close()
-    assert obs.shape == (400, 44) and act.shape == (400, 12)
+    contract = pair[0].unwrapped.contract
+    assert obs.shape == (400, contract.observation_size) and act.shape == (400, 12)
     assert np.all(np.abs(act) <= 2.0) and np.ptp(act, axis=0).max() > 0.1   # clipped, and a gait, not a pose
     assert stats["falls"] == 0
-    actor = fresh_actor(seed=0)
+    actor = fresh_actor(contract, seed=0)
     before = _mse(actor, obs, act)
     fit(actor, obs, act, args, torch.Generator().manual_seed(0))
     after = _mse(actor, obs, act)
@@ -54,7 +55,8 @@ def test_tiny_distillation_exports_a_loadable_policy(tmp_path: Path) -> None:
     policy = load_policy(out)
     meta = json.loads(out.with_suffix(".json").read_text())
     assert "not VIRL" in meta["reward"] and len(meta["distill_rounds"]) == 2
-    assert meta["demo"]["num_frames"] == 100 and policy.with_phase
+    assert meta["demo"]["num_frames"] == 100 and policy.contract.with_phase and policy.contract.tg is None
+    assert policy.contract.phase_hz == 0.5                      # one cycle per 100 frames at 50 Hz
     a = policy.act(np.zeros(policy.obs_size, np.float32))
     assert a.shape == (12,) and np.all(np.isfinite(a))
 

@@ -10,18 +10,25 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from virl_quad.export import export_actor, fresh_actor
+from virl_quad.export import default_contract, export_actor, fresh_actor
 from virl_quad.policy_io import load_policy
+
+C = default_contract("pupper", demo_frames=50)      # 46 observations, 12 actions
+N = C.observation_size
+
+
+def _export(actor, path: Path, **kw) -> Path:
+    return export_actor(actor, "pupper", path, C, **kw)
 
 
 def test_eager_and_torchscript_agree(tmp_path: Path) -> None:
-    actor = fresh_actor(seed=3)
+    actor = fresh_actor(C, seed=3)
     # give the normaliser non-trivial statistics, as after training
     actor.obs_normalizer.train()
-    actor.update_normalization(TensorDict({"policy": torch.randn(256, 44) * 3 + 1}, batch_size=[256]))
+    actor.update_normalization(TensorDict({"policy": torch.randn(256, N) * 3 + 1}, batch_size=[256]))
     actor.eval()
-    policy = load_policy(export_actor(actor, "pupper", tmp_path / "p.pt", demo={"num_frames": 50}))
-    x = np.random.default_rng(0).normal(size=(32, 44)).astype(np.float32)
+    policy = load_policy(_export(actor, tmp_path / "p.pt", demo={"num_frames": 50}))
+    x = np.random.default_rng(0).normal(size=(32, N)).astype(np.float32)
     with torch.inference_mode():
         eager = actor(TensorDict({"policy": torch.from_numpy(x)}, batch_size=[32])).numpy()
     with torch.inference_mode():
@@ -34,7 +41,7 @@ def test_eager_and_torchscript_agree(tmp_path: Path) -> None:
 
 
 def test_fast_path_only_for_the_exported_structure(tmp_path: Path) -> None:
-    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    path = _export(fresh_actor(C), tmp_path / "p.pt")
     assert load_policy(path, numpy_fast_path=False).fast is None
 
     class Other(torch.nn.Module):   # right sizes, different computation: must stay on torch
@@ -44,12 +51,12 @@ def test_fast_path_only_for_the_exported_structure(tmp_path: Path) -> None:
     torch.jit.script(Other()).save(str(path))
     policy = load_policy(path)
     assert policy.fast is None
-    x = np.linspace(-1, 1, 44).astype(np.float32)
+    x = np.linspace(-1, 1, N).astype(np.float32)
     np.testing.assert_allclose(policy.act(x), np.tanh(x[:12]) * 0.5, atol=1e-6)
 
 
 def test_metadata_mismatch_is_refused(tmp_path: Path) -> None:
-    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    path = _export(fresh_actor(C), tmp_path / "p.pt")
     with pytest.raises(ValueError, match="not 'laikago'"):
         load_policy(path, robot="laikago")
     meta = json.loads(path.with_suffix(".json").read_text())
@@ -65,7 +72,7 @@ def test_metadata_mismatch_is_refused(tmp_path: Path) -> None:
 
 
 def test_not_torchscript_and_missing(tmp_path: Path) -> None:
-    path = export_actor(fresh_actor(), "pupper", tmp_path / "p.pt")
+    path = _export(fresh_actor(C), tmp_path / "p.pt")
     path.write_bytes(b"not a model")
     with pytest.raises(ValueError, match="not a TorchScript policy"):
         load_policy(path)
@@ -78,8 +85,8 @@ def test_not_torchscript_and_missing(tmp_path: Path) -> None:
 
 
 def test_policy_rejects_nan_observation(tmp_path: Path) -> None:
-    policy = load_policy(export_actor(fresh_actor(), "pupper", tmp_path / "p.pt"))
-    obs = np.zeros(44, np.float32)
+    policy = load_policy(_export(fresh_actor(C), tmp_path / "p.pt"))
+    obs = np.zeros(N, np.float32)
     obs[3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         policy.act(obs)
@@ -89,13 +96,13 @@ def test_fast_path_for_a_normaliser_with_tiny_std(tmp_path: Path) -> None:
     """An input that barely varies in the data (std 1e-4, as a behaviour-cloned policy's) makes
     the actor's outputs huge far off that scale; the fast path is still taken, and matches on
     the policy's own input scale."""
-    actor = fresh_actor(seed=1)
+    actor = fresh_actor(C, seed=1)
     actor.obs_normalizer.train()
-    data = torch.randn(512, 44) * 0.3
+    data = torch.randn(512, N) * 0.3
     data[:, 2] = 1e-4 * torch.randn(512) - 1.0          # gravity z: almost constant
     actor.update_normalization(TensorDict({"policy": data}, batch_size=[512]))
     actor.eval()
-    policy = load_policy(export_actor(actor, "pupper", tmp_path / "p.pt", demo={"num_frames": 50}))
+    policy = load_policy(_export(actor, tmp_path / "p.pt", demo={"num_frames": 50}))
     assert policy.fast is not None
     x = (data[:64] * 1.5).numpy()
     with torch.inference_mode():

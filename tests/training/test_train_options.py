@@ -36,17 +36,25 @@ def test_adversarial_weight_reaches_the_pair_sampler() -> None:
         validate(TrainArgs(adversarial_weight=-1.0))
 
 
-def test_checkpoint_action_facts_must_match_the_robot() -> None:
+def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:
+    """The action facts come from the run (the env's contract saved in the checkpoint), not from
+    today's defaults: a run trained with action scale 0.3 exports with 0.3. A checkpoint without
+    them, or trained with other PD gains, is refused."""
+    from virl_quad import robots
+    from virl_quad.envs import EnvConfig, policy_contract
     from virl_quad.training import checkpoint
 
-    facts = checkpoint.action_facts("pupper")
-    checkpoint.check_action_facts({"action_facts": facts}, "pupper")
-    with pytest.raises(ValueError, match="action_scale 0.3"):
-        checkpoint.check_action_facts({"action_facts": dict(facts, action_scale=0.3)}, "pupper")
+    spec = robots.get("pupper")
+    contract = policy_contract(spec, EnvConfig(action_scale=0.3, action_clip=1.5), 40)
+    data = {"contract": checkpoint.contract_payload(contract, spec)}
+    got = checkpoint.contract_of(data, "pupper")
+    assert got == contract and got.action_scale == 0.3 != spec.action_scale
     with pytest.raises(ValueError, match="does not record"):
-        checkpoint.check_action_facts({}, "pupper")
+        checkpoint.contract_of({}, "pupper")
     with pytest.raises(ValueError, match="kp"):
-        checkpoint.check_action_facts({"action_facts": dict(facts, kp=[1.0] * 12)}, "pupper")
+        checkpoint.contract_of({"contract": dict(data["contract"], kp=[1.0] * 12)}, "pupper")
+    with pytest.raises(ValueError, match="lacks its trajectory generator"):
+        checkpoint.contract_of({"contract": dict(data["contract"], action_size=14)}, "pupper")
 
 
 def test_ground_shift_renders_match_the_demo() -> None:

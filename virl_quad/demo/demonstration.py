@@ -95,7 +95,3 @@ class Demonstration:
         lo = np.maximum(i - w, 0)
         hi = np.maximum(i, 1)                                        # frame 0: the step to frame 1
         return (x[hi] - x[lo]) * self.fps / (hi - lo)
-
-    def phase(self, step: int) -> float:
-        """Demonstration phase in [0, 1) at step ``step``."""
-        return self.index(step) / self.num_frames

@@ -113,9 +113,10 @@ def policy_for_tests(folder: Path | str) -> tuple[Path, bool]:
 
 def export_untrained(folder: Path | str, robot: str, seed: int = 0) -> Path:
     """Export an untrained policy for ``robot`` to ``folder/untrained_<robot>.pt``."""
-    from virl_quad.export import export_actor, fresh_actor
+    from virl_quad.export import default_contract, export_actor, fresh_actor
 
     out = Path(folder) / f"untrained_{robot}.pt"
     if not out.is_file():
-        export_actor(fresh_actor(seed=seed), robot, out, demo={"source": "trot", "num_frames": 40})
+        contract = default_contract(robot, demo_frames=40)
+        export_actor(fresh_actor(contract, seed=seed), robot, out, contract, demo={"source": "trot", "num_frames": 40})
     return out

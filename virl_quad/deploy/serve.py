@@ -5,18 +5,20 @@
 It waits for the HAL's liveliness token, queries its ANNOUNCE and refuses (one line, exit 2)
 a robot, joint order, control period or protocol version that the policy was not made for.
 Then, for every STATE on ``virl/<id>/state`` it builds the observation with
-:func:`virl_quad.envs.observation.policy_observation` (the training builder), runs the
+:func:`virl_quad.policy.observation.policy_observation` (the training builder), runs the
 policy and publishes a COMMAND on ``virl/<id>/cmd``: ``q_target`` from
-``LoadedPolicy.joint_targets``, ``kp``/``kd`` from the policy metadata, no feed-forward,
-``ref_seq`` = the state's ``seq``. The demonstration phase is the server's own step
-counter: ``phase = (k % demo_frames) / demo_frames`` (0 without a demonstration).
+:class:`virl_quad.policy.ActionMap` (the training env's action -> target map: clip, trajectory
+generator + residual, rate limit, joint limits), ``kp``/``kd`` from the policy metadata, no
+feed-forward, ``ref_seq`` = the state's ``seq``. The phase clock is the ActionMap's
+(:class:`virl_quad.policy.PhaseClock`, at the TG's or the demonstration's frequency).
 
-The clock and the last action start as a training episode starts them (k = 0, last action
-0) at the first state the HAL flags ACTIVE (``STATE_FLAG_ACTIVE``: the answer will be
-applied). States before it (IDLE, the RAMP to the default pose, DAMPING) are answered from
-that starting point without advancing it, so a HAL that ramps for 2 s, or is re-armed,
-starts the policy at phase 0. A HAL whose ANNOUNCE lacks ``active_flag`` gets the old
-behaviour: the clock runs from the first state served (logged at start).
+An episode starts as a training episode starts (clock at phase 0, last action 0, the rate
+limit from the measured pose, the heading's start yaw = the state's yaw) at the first state
+the HAL flags ACTIVE (``STATE_FLAG_ACTIVE``: the answer will be applied). States before it
+(IDLE, the RAMP to the default pose, DAMPING) are answered as an episode's first step from
+that state, without starting it, so a HAL that ramps for 2 s, or is re-armed, starts the
+policy at phase 0. A HAL whose ANNOUNCE lacks ``active_flag`` gets the old behaviour: the
+episode runs from the first state served (logged at start).
 
 States with NaN/inf or a non-unit quaternion are skipped (not answered) and counted; so
 are undecodable or reordered ones. When the HAL's token disappears the server stops
@@ -44,7 +46,8 @@ from virl_quad.cli import UserError, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
 from virl_quad.deploy.protocol import MsgType, ProtocolError
-from virl_quad.envs.observation import policy_observation
+from virl_quad.policy.action import ActionMap
+from virl_quad.policy.observation import policy_observation, yaw
 
 _POLICIES = Path(__file__).resolve().parents[2] / "policies"
 #: Policies served when --policy is not given, the first one present: the VIRL policy of the
@@ -85,29 +88,35 @@ class PolicyRunner:
         meta = policy.meta
         self.kp = np.asarray(meta["kp"], dtype=np.float64)            # N·m/rad
         self.kd = np.asarray(meta["kd"], dtype=np.float64)            # N·m·s/rad
-        self.frames = policy.demo_frames
-        self.with_phase = policy.with_phase
+        self.actions = ActionMap(self.spec, policy.contract)          # the env's action -> target map
+        self.with_phase = policy.contract.with_phase
         self.counts: Counter[str] = Counter()   # served, skipped reasons
-        self.gate_on_active = True              # advance the clock only on ACTIVE-flagged states
+        self.gate_on_active = True              # start the episode only on ACTIVE-flagged states
         self._lock = threading.Lock()
         self._seq = P.SeqCounter()
         self._encode = P.CommandEncoder(self.kp, self.kd, np.zeros(P.NUM_JOINTS))   # no feed-forward
-        self._zero_action = np.zeros(P.NUM_JOINTS)
+        self._zero_action = np.zeros(self.actions.size)
         self._zero_action.flags.writeable = False
         self.reset()
 
     def reset(self) -> None:
-        """Start again: step counter 0, last action 0 (a new HAL session)."""
+        """Start again: no episode running (a new HAL session)."""
         with self._lock:
-            self.k = 0                                  # commands sent: demonstration clock
-            self.last_action = self._zero_action        # clipped, unscaled (as in training)
+            self.k = 0                                  # commands applied in this episode
+            self.started = False                        # an ACTIVE state has started the episode
+            self.start_yaw = 0.0                        # rad, the heading's origin
             self.last_state_seq = -1
 
+    @property
+    def last_action(self) -> np.ndarray:
+        """The last applied action, clipped and unscaled (zero before the episode starts)."""
+        return self.actions.last_action if self.started else self._zero_action
+
     def phase(self) -> float | None:
-        """Demonstration phase in [0, 1) of the next command (None if the policy has none)."""
+        """Clock phase in [0, 1) of the next command (None if the policy has no clock)."""
         if not self.with_phase:
             return None
-        return (self.k % self.frames) / self.frames if self.frames > 0 else 0.0
+        return self.actions.phase if self.started else 0.0
 
     def handle(self, data: bytes) -> tuple[bytes | None, str]:
         """One STATE message -> (COMMAND message or None, skip reason or "").
@@ -121,9 +130,9 @@ class PolicyRunner:
             if seq <= self.last_state_seq:
                 return self._skip("stale_state")
             live = not self.gate_on_active or bool(flags & P.STATE_FLAG_ACTIVE)
-            if not live:                                         # not applied: stay at the episode start
+            if not live:                                         # not applied: no episode runs
+                self.started = False
                 self.k = 0
-                self.last_action = self._zero_action
             quat = f[P.STATE_QUAT]
             x, y, z, w = quat.tolist()
             norm2 = x * x + y * y + z * z + w * w
@@ -131,9 +140,13 @@ class PolicyRunner:
                 return self._skip("non_finite_state")
             if not 0.81 < norm2 < 1.21:                          # |quat| outside [0.9, 1.1]
                 return self._skip("bad_quaternion")
+            quat = quat / math.sqrt(norm2)
+            fresh = not self.started                             # this state is an episode's first
+            start_yaw = yaw(quat) if fresh else self.start_yaw
+            q = f[P.STATE_Q]
             try:                                                # raises on NaN/inf in gyro, q, dq
-                obs = policy_observation(self.spec, quat / math.sqrt(norm2), f[P.STATE_GYRO], f[P.STATE_Q],
-                                         f[P.STATE_DQ], self.last_action, self.phase())
+                obs = policy_observation(self.spec, quat, f[P.STATE_GYRO], q, f[P.STATE_DQ], self.last_action,
+                                         self.phase(), start_yaw)
             except ValueError:
                 return self._skip("non_finite_state")
             self.last_state_seq = seq
@@ -141,10 +154,12 @@ class PolicyRunner:
                 action = self.policy.act(obs)
             except ValueError:                                  # the policy produced NaN/inf
                 return self._skip("policy_non_finite")
-            clipped = self.policy.clip_action(action)           # as training observes it
-            q_target = self.policy.joint_targets(clipped)       # rad, within the joint limits
+            if fresh:                                            # as the env's reset: pose, phase 0, yaw
+                self.actions.reset(q, 0.0)
+                self.start_yaw = start_yaw
+            q_target = self.actions.step(action)                # rad, rate- and joint-limited
             if live:
-                self.last_action = clipped
+                self.started = True
                 self.k += 1
             out = self._encode(q_target, seq, self._seq())
         self.counts["served"] += 1
@@ -238,7 +253,7 @@ class Server:
             raise UserError(problem)
         self.runner.gate_on_active = bool(body.get("active_flag"))
         if not self.runner.gate_on_active:
-            self.log("the HAL does not flag ACTIVE states: the phase clock runs from the first state served")
+            self.log("the HAL does not flag ACTIVE states: the episode (phase clock) runs from the first state served")
         return True
 
     def run(self, stop: StopFlag, wait: float) -> None:
@@ -324,7 +339,8 @@ def main(config: ServeConfig) -> int:
     gc.freeze()
     meta = policy.meta
     log(f"policy {path} (reward: {meta.get('reward', 'not recorded')}) for {meta['robot']} "
-        f"({len(meta['joint_names'])} joints, {1 / float(meta['control_dt']):g} Hz, demo frames {runner.frames}); "
+        f"({len(meta['joint_names'])} joints, {1 / float(meta['control_dt']):g} Hz, "
+        f"{'trajectory generator' if policy.contract.tg is not None else 'no trajectory generator'}); "
         f"waiting for HAL {robot_id!r}")
     with StopFlag() as stop:
         with open_session(conf) as session:

@@ -10,7 +10,7 @@ import dataclasses
 import gymnasium as gym
 
 from virl_quad import robots
-from virl_quad.envs.quadruped import EnvConfig, QuadrupedEnv, expert_frames
+from virl_quad.envs.quadruped import EnvConfig, QuadrupedEnv, expert_frames, policy_contract
 
 #: Registered environment builders by name (one today; more tasks plug in here).
 ENVS = {"quadruped": QuadrupedEnv}
@@ -31,4 +31,4 @@ def make(robot: str, *, env: str = "quadruped", render_mode: str | None = None, 
     return ENVS[env](spec, EnvConfig(**overrides), render_mode=render_mode)
 
 
-__all__ = ["make", "EnvConfig", "QuadrupedEnv", "ENVS", "expert_frames"]
+__all__ = ["make", "EnvConfig", "QuadrupedEnv", "ENVS", "expert_frames", "policy_contract"]

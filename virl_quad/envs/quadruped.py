@@ -1,16 +1,20 @@
 """Gymnasium environment: one quadruped in PyBullet, proprioceptive policy state and camera frames.
 
 Observation (``gymnasium.spaces.Dict``):
-- ``policy``      float32, see :mod:`virl_quad.envs.observation` (what the robot can measure),
+- ``policy``      float32, see :mod:`virl_quad.policy.observation` (what the robot can measure),
 - ``privileged``  float32: body-frame base velocity x2.0, base height (m), foot contacts,
                   the randomised physical parameters (critic only),
 - ``agent_image`` uint8 (48, 48): the follow camera's view of the agent,
 - ``expert_image`` uint8 (48, 48): with a demonstration, its frame at the env's demonstration clock.
 With ``speed_strip`` both images carry the forward speed in their bottom rows (``sim.strip.stamp_speed``):
 the agent's measured over the last ``SPEED_WINDOW`` steps, the demonstration's from its displacement.
-Action: joint position offsets from the default pose, ``target = default + action_scale * a`` (rad),
-clipped to the joint limits and moved at most ``max_target_step`` rad per step (the deploy safety
-layer's limit). No task reward (0.0): the VIRL reward is computed by the trainer.
+Action (:class:`virl_quad.policy.ActionMap`, the policy server's too): without a trajectory
+generator 12 joint position offsets from the default pose, ``target = default + action_scale * a``
+(rad); with one (``tg``) 12 residuals on the TG's joint targets and 2 TG modulation entries
+(frequency and amplitude scale), ``target = TG(phase) + action_scale * a[:12]``. Either way moved
+at most ``max_target_step`` rad per step (the deploy safety layer's limit) and clipped to the
+joint limits. The phase clock runs at the TG's frequency, else at the demonstration's cycle
+(none without either). No task reward (0.0): the VIRL reward is computed by the trainer.
 """
 
 from __future__ import annotations
@@ -23,8 +27,11 @@ import gymnasium as gym
 import numpy as np
 
 from virl_quad.demo.demonstration import Demonstration
-from virl_quad.envs import observation as obs_lib
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
+from virl_quad.policy import observation as obs_lib
+from virl_quad.policy.action import ActionMap
+from virl_quad.policy.contract import PolicyContract
+from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
 from virl_quad.sim.strip import SPEED_WINDOW, stamp_speed
@@ -62,6 +69,8 @@ class EnvConfig:
     oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
     sim_dt: float | None = None            # s, physics step; None = the robot's default
     substeps: int | None = None            # physics steps per control step; None = the robot's default
+    tg: TGParams | None = None             # trajectory generator the policy acts as a residual on (action
+                                           # size 14); None: actions are offsets from the default pose (12)
 
 
 def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:
@@ -97,6 +106,18 @@ def expert_frames(demo: Demonstration, spec: RobotSpec, speed_strip: bool,
     return stamp_speed(frames, speed, spec.strip_full_speed)
 
 
+def policy_contract(spec: RobotSpec, cfg: EnvConfig, demo_frames: int | None) -> PolicyContract:
+    """The policy contract of an env for ``spec`` with ``cfg`` whose demonstration has ``demo_frames``
+    frames (None: no demonstration): action scale, clip and rate limit, the TG, and the phase clock
+    (the TG's, else one cycle per demonstration loop, else none)."""
+    if cfg.tg is not None and not isinstance(cfg.tg, TGParams):
+        raise ValueError(f"tg must be TGParams or None, got {type(cfg.tg).__name__}")
+    scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
+    phase_hz = 1.0 / (demo_frames * spec.control_dt) if cfg.tg is None and demo_frames else None
+    return PolicyContract(float(scale), float(cfg.action_clip), cfg.max_target_step, spec.control_dt, cfg.tg,
+                          phase_hz)
+
+
 class QuadrupedEnv(gym.Env):
     """One robot, one episode at a time. Build it with ``virl_quad.envs.make``."""
 
@@ -117,20 +138,21 @@ class QuadrupedEnv(gym.Env):
         self.action_scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
         seconds = cfg.episode_seconds if cfg.episode_seconds is not None else spec.episode_seconds
         self.max_steps = int(round(seconds / spec.control_dt))
-        with_phase = self.demo is not None
-        n_policy = obs_lib.policy_size(with_phase)
+        self.contract = policy_contract(spec, cfg, self.demo.num_frames if self.demo is not None else None)
+        self.actions = ActionMap(spec, self.contract)
+        n_policy = self.contract.observation_size
         image = gym.spaces.Box(0, 255, (FRAME_SIZE, FRAME_SIZE), np.uint8)
         spaces = {
             "policy": gym.spaces.Box(-np.inf, np.inf, (n_policy,), np.float32),
             "privileged": gym.spaces.Box(-np.inf, np.inf, (PRIVILEGED_SIZE,), np.float32),
             "agent_image": image,
         }
-        if with_phase:
+        if self.demo is not None:
             spaces["expert_image"] = image
         self.observation_space = gym.spaces.Dict(spaces)
-        self.action_space = gym.spaces.Box(-cfg.action_clip, cfg.action_clip, (12,), np.float32)
+        self.action_space = gym.spaces.Box(-cfg.action_clip, cfg.action_clip, (self.contract.action_size,), np.float32)
         self.rand: Randomization = sample(DRConfig.off(), np.random.default_rng(0), spec)
-        self.last_action = np.zeros(12)
+        self.start_yaw = 0.0                                      # rad, the base's yaw at reset
         self.steps = 0
         self.demo_step = 0
         self._history: deque = deque(maxlen=8)
@@ -159,14 +181,15 @@ class QuadrupedEnv(gym.Env):
             if options and "demo_step" in options:
                 self.demo_step = int(options["demo_step"])
         self._place_robot()
-        self.last_action = np.zeros(12)
         self.steps = 0
         self._history.clear()
         self._travel.clear()
         self._state = self.world.state()
         yaw = float(self._state.rpy[2])
         self._start_heading = np.array([np.cos(yaw), np.sin(yaw)])   # unit, world xy
-        self.last_target = self._state.q.copy()   # rad: the rate limit starts from the pose
+        self.start_yaw = obs_lib.yaw(self._state.base_quat)          # rad, the observation's heading origin
+        # the rate limit starts from the pose; the clock at the demonstration's phase (0 without one)
+        self.actions.reset(self._state.q, self.demo_step / self.demo.num_frames if self.demo is not None else 0.0)
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
@@ -195,22 +218,10 @@ class QuadrupedEnv(gym.Env):
 
     def step(self, action: np.ndarray):
         """Apply one action (see module doc) for one control period."""
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (12,):
-            raise ValueError(f"action must have 12 entries, got shape {np.shape(action)}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("action contains NaN or inf")
-        a = np.clip(a, -self.cfg.action_clip, self.cfg.action_clip)
-        target = self.robot.default_pose + self.action_scale * a
-        step = self.cfg.max_target_step
-        if step is not None:   # as the safety layer does on the robot: rate limit, then the joint limits
-            target = np.minimum(np.maximum(target, self.last_target - step), self.last_target + step)
-        target = self.robot.clip_to_limits(target)
+        target = self.actions.step(action)   # ValueError for a wrong size or NaN/inf
         self.world.step(target)
-        self.last_target = target
         self.steps += 1
         self.demo_step += 1
-        self.last_action = a
         if self.world.time >= self._next_push:
             self._push()
         self._state = s = self.world.state()
@@ -271,8 +282,8 @@ class QuadrupedEnv(gym.Env):
             gyro = gyro + rng.normal(0, NOISE_GYRO * n, 3)
             q = q + rng.normal(0, NOISE_Q * n, 12)
             dq = dq + rng.normal(0, NOISE_DQ * n, 12)
-        phase = self.demo.phase(self.demo_step) if self.demo is not None else None
-        policy = obs_lib.policy_observation(self.robot, quat, gyro, q, dq, self.last_action, phase)
+        policy = obs_lib.policy_observation(self.robot, quat, gyro, q, dq, self.actions.last_action,
+                                            self.actions.phase, self.start_yaw)
         if n > 0:
             policy[:3] += self.np_random.normal(0, NOISE_GRAVITY * n, 3).astype(np.float32)
         s = self._state
@@ -296,6 +307,16 @@ class QuadrupedEnv(gym.Env):
     def _info(self) -> dict:
         s = self._state
         return {"base_pos": s.base_pos.copy(), "time": s.time, "demo_step": self.demo_step}
+
+    @property
+    def last_action(self) -> np.ndarray:
+        """The last action, clipped (what the observation shows)."""
+        return self.actions.last_action
+
+    @property
+    def last_target(self) -> np.ndarray:
+        """rad (12): the PD targets of the last step (the pose at reset)."""
+        return self.actions.last_target
 
     @property
     def state(self) -> RobotState:

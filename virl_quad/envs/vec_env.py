@@ -99,15 +99,18 @@ class QuadrupedVecEnv(VecEnv):
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         probe = make(robot, **overrides)  # validates the robot and overrides here, with a clear error
         spec = probe.unwrapped.robot
+        #: the policy contract of these envs (action size, scale, clip, rate limit, TG, clock)
+        self.contract = probe.unwrapped.contract
         probe.close()
         seconds = episode_seconds if episode_seconds is not None else spec.episode_seconds
         self.num_envs = num_envs
-        self.num_actions = 12
+        self.num_actions = self.contract.action_size   # 12, or 14 with a trajectory generator
         self.max_episode_length = int(round(seconds / spec.control_dt))
         self.device = torch.device(device)
         self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long, device=self.device)
         self.cfg = {"robot": robot, "num_envs": num_envs, "seed": seed, "episode_seconds": seconds,
-                    **{k: v for k, v in overrides.items() if k != "demo"}}
+                    **{k: v for k, v in overrides.items() if k not in ("demo", "tg")},
+                    "tg": None if self.contract.tg is None else self.contract.tg.to_dict()}
         self.spec = spec
         workers = min(num_envs, mp.cpu_count()) if num_workers is None else num_workers
         ids = np.array_split(np.arange(num_envs), max(workers, 1))

@@ -12,7 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pybullet
+
+from virl_quad.quiet import import_pybullet_quietly
+
+import_pybullet_quietly()   # first: its build-time banner would break the CLIs' one-line errors
+import pybullet  # noqa: E402
 
 from virl_quad.quiet import quiet_fd
 from virl_quad.kinematics.frames import laikago_clip_root_to_zup, random_quat

@@ -11,7 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet
+
+from virl_quad.quiet import import_pybullet_quietly
+
+import_pybullet_quietly()   # first: its build-time banner would break the CLIs' one-line errors
+import pybullet  # noqa: E402
 
 FRAME_SIZE = 48  # px, VIRL frame side
 

@@ -13,7 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet
+
+from virl_quad.quiet import import_pybullet_quietly
+
+import_pybullet_quietly()   # first: its build-time banner would break the CLIs' one-line errors
+import pybullet  # noqa: E402
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 

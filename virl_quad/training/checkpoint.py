@@ -69,29 +69,35 @@ def load(path: str | Path) -> dict:
     return data
 
 
-def action_facts(robot: str) -> dict:
-    """How actions become PD targets for ``robot`` now: what a checkpoint's policy was trained with."""
+def contract_payload(contract, spec) -> dict:
+    """What a checkpoint records about how its policy's actions and observations are defined: the
+    policy contract (metadata form) and the PD gains it was trained with."""
+    return {**contract.to_metadata(), "kp": [float(v) for v in spec.kp],   # N·m/rad
+            "kd": [float(v) for v in spec.kd]}                             # N·m·s/rad
+
+
+def contract_of(data: dict, robot: str):
+    """The :class:`~virl_quad.policy.PolicyContract` a checkpoint's policy was trained with.
+
+    ValueError (one line) when the checkpoint does not record it (an older version), or when the
+    robot's control period or PD gains have changed since: its actions would mean other torques."""
     from virl_quad import robots
-    from virl_quad.envs.quadruped import EnvConfig
+    from virl_quad.policy.contract import PolicyContract
 
     spec = robots.get(robot)
-    return {"action_scale": float(spec.action_scale),          # rad per unit action
-            "action_clip": float(EnvConfig().action_clip),     # |a| bound before scaling
-            "control_dt": float(spec.control_dt),              # s
-            "max_target_step": float(EnvConfig().max_target_step or 0.0),  # rad per step (0: none)
-            "kp": [float(v) for v in spec.kp], "kd": [float(v) for v in spec.kd]}
-
-
-def check_action_facts(data: dict, robot: str) -> None:
-    """ValueError (one line) if the checkpoint's policy was trained with other action facts."""
-    saved, now = data.get("action_facts"), action_facts(robot)
-    if saved is None:
-        raise ValueError("checkpoint does not record the action scale, clip, control period and gains it was "
-                         "trained with (an older version wrote it): train again")
-    for key, want in now.items():
+    saved = data.get("contract")
+    if not isinstance(saved, dict):
+        raise ValueError("checkpoint does not record its policy contract (action scale, clip, trajectory "
+                         "generator, observation layout; an older version wrote it): train again")
+    for key in ("kp", "kd"):
+        want = np.asarray(getattr(spec, key), dtype=np.float64)
         if not np.allclose(np.asarray(saved.get(key, np.nan), dtype=np.float64), want, atol=1e-9):
-            raise ValueError(f"checkpoint was trained with {key} {saved.get(key)}, but {robot} now has {want}: "
-                             f"its actions would mean other joint targets; train again")
+            raise ValueError(f"checkpoint was trained with {key} {saved.get(key)}, but {robot} now has "
+                             f"{want.tolist()}: its actions would mean other torques; train again")
+    try:
+        return PolicyContract.from_metadata(saved, spec)
+    except ValueError as e:
+        raise ValueError(f"checkpoint: {e}; train again") from None
 
 
 def load_reward_model(run_dir: str | Path):

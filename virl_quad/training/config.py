@@ -52,6 +52,7 @@ class TrainArgs:
     init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
     video: bool = True                 # write the final side-by-side video (demonstration | agent)
+    tg: bool = False                   # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
 
 
 def validate(args: TrainArgs) -> None:

@@ -58,7 +58,7 @@ class VirlRunner(OnPolicyRunner):
         return {**self.alg.save(), "reward": self.reward_source.state_dict(), "config": self.config,
                 "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
                 "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
-                "action_facts": checkpoint.action_facts(self.config["robot"])}
+                "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
         """Write ``checkpoint.pt`` atomically in the run folder."""
