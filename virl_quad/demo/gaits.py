@@ -97,7 +97,7 @@ def gait_params(robot: str, gait: str) -> GaitParams:
     return PARAMS[robot][gait]
 
 
-def _cycle_steps(spec: RobotSpec, frequency: float) -> int:
+def cycle_steps(spec: RobotSpec, frequency: float) -> int:
     """Control steps per gait cycle (at least 4)."""
     return max(4, int(round(spec.control_hz / frequency)))
 
@@ -157,7 +157,7 @@ def gait_motion(robot: str, gait: str = DEFAULT_GAIT, keyframes_per_step: int = 
     params = replace(params, **overrides)
     if not (0.0 < params.duty < 1.0) or params.frequency <= 0 or params.height <= 0:
         raise ValueError(f"invalid gait parameters {params}")
-    steps = _cycle_steps(spec, params.frequency)
+    steps = cycle_steps(spec, params.frequency)
     params = replace(params, frequency=spec.control_hz / steps)
     n = steps * keyframes_per_step
     times = np.arange(n + 1) / (n * params.frequency)                  # one cycle, both ends, s

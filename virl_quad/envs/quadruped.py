@@ -188,8 +188,10 @@ class QuadrupedEnv(gym.Env):
         yaw = float(self._state.rpy[2])
         self._start_heading = np.array([np.cos(yaw), np.sin(yaw)])   # unit, world xy
         self.start_yaw = obs_lib.yaw(self._state.base_quat)          # rad, the observation's heading origin
-        # the rate limit starts from the pose; the clock at the demonstration's phase (0 without one)
-        self.actions.reset(self._state.q, self.demo_step / self.demo.num_frames if self.demo is not None else 0.0)
+        # the rate limit starts from the pose; the clock where it is at the demonstration's step
+        # (the TG's phase at that time of the reference motion it was fitted to; 0 without one)
+        hz = self.contract.clock_hz
+        self.actions.reset(self._state.q, self.demo_step * self.robot.control_dt * hz if hz and self.demo else 0.0)
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()

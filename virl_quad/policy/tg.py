@@ -35,8 +35,8 @@ FREQUENCY_SCALE_RANGE = (0.5, 1.5)             # bounds of the frequency scale
 AMPLITUDE_SCALE_RANGE = (0.0, 1.5)             # bounds of the step length and swing height scale
 REACH_TOLERANCE = 1e-4                         # m, largest IK miss accepted for a nominal TG foot
 
-#: (lower, upper) bound of each scalar field; the lower bound is excluded where marked.
-_BOUNDS: dict[str, tuple[float, float, bool]] = {
+#: (lower, upper, lower bound excluded) of each scalar field of :class:`TGParams`.
+BOUNDS: dict[str, tuple[float, float, bool]] = {
     "frequency": (0.0, 10.0, True),            # Hz
     "duty": (0.05, 0.95, False),               # fraction of the cycle in stance
     "step_length": (0.0, 1.0, False),          # m
@@ -65,7 +65,7 @@ class TGParams:
                                                        # frame; None: the feet of the spec's default pose
 
     def __post_init__(self) -> None:
-        for name, (lo, hi, open_lo) in _BOUNDS.items():
+        for name, (lo, hi, open_lo) in BOUNDS.items():
             v = _number(name, getattr(self, name))
             if v > hi or v < lo or (open_lo and v == lo):
                 raise ValueError(f"TG field {name!r} = {v} is outside {'(' if open_lo else '['}{lo}, {hi}]")
@@ -124,6 +124,23 @@ def modulation_facts() -> dict:
             "amplitude_scale": list(AMPLITUDE_SCALE_RANGE)}
 
 
+def foot_positions(phase: float | np.ndarray, offsets: np.ndarray, duty: float, step_length: float,
+                   swing_height: float, neutral_xy: np.ndarray, stance_z: np.ndarray) -> np.ndarray:
+    """The TG's feet (m, base frame; see the module doc) at clock ``phase`` (scalar -> ``(4, 3)``,
+    ``(..., 1)`` -> ``(..., 4, 3)``): leg ``offsets`` (4,) cycles, ``duty``, ``step_length`` (m),
+    ``swing_height`` (m), ``neutral_xy`` (4, 2) m, ``stance_z`` (4,) m (foot z in stance)."""
+    length = step_length
+    phi = np.mod(np.asarray(phase, dtype=np.float64) + offsets, 1.0)           # leg phases (..., 4)
+    s = np.maximum(phi - duty, 0.0) / (1.0 - duty)                             # swing progress, 0 in stance
+    ang = 2.0 * np.pi * s
+    stance_x = 0.5 * length - length * phi / duty
+    swing_x = length * ((s - np.sin(ang) / (2.0 * np.pi)) - (1.0 - duty) * s) / duty - 0.5 * length
+    x = neutral_xy[:, 0] + np.where(phi >= duty, swing_x, stance_x)
+    z = stance_z + (0.5 * swing_height) * (1.0 - np.cos(ang))                  # no lift in stance (s = 0)
+    y = np.broadcast_to(neutral_xy[:, 1], x.shape)
+    return np.stack([x, y, z], axis=-1)
+
+
 class TrajectoryGenerator:
     """The TG of one robot: foot positions and joint targets at a phase."""
 
@@ -154,18 +171,8 @@ class TrajectoryGenerator:
     def foot_positions(self, phase: float | np.ndarray, amplitude: float = 1.0) -> np.ndarray:
         """Base-frame feet (m): ``(4, 3)`` for a scalar phase, ``(..., 4, 3)`` for phases ``(..., 1)``."""
         p = self.params
-        length, lift = p.step_length * amplitude, p.swing_height * amplitude
-        duty = p.duty
-        phi = np.mod(np.asarray(phase, dtype=np.float64) + self.offsets, 1.0)     # leg phases (..., 4)
-        s = np.maximum(phi - duty, 0.0) / (1.0 - duty)                             # swing progress, 0 in stance
-        ang = 2.0 * np.pi * s
-        stance_x = 0.5 * length - length * phi / duty
-        swing_x = length * ((s - np.sin(ang) / (2.0 * np.pi)) - (1.0 - duty) * s) / duty - 0.5 * length
-        swing = phi >= duty
-        x = self.neutral_xy[:, 0] + np.where(swing, swing_x, stance_x)
-        z = self.stance_z + (0.5 * lift) * (1.0 - np.cos(ang))                       # 0 lift in stance (s = 0)
-        y = np.broadcast_to(self.neutral_xy[:, 1], x.shape)
-        return np.stack([x, y, z], axis=-1)
+        return foot_positions(phase, self.offsets, p.duty, p.step_length * amplitude, p.swing_height * amplitude,
+                              self.neutral_xy, self.stance_z)
 
     def joint_targets(self, phase: float | np.ndarray, amplitude: float = 1.0) -> np.ndarray:
         """Joint angles (rad, ``(12,)`` or ``(..., 12)``) that put the feet on the TG trajectory."""
