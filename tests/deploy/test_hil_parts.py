@@ -13,7 +13,7 @@ from virl_quad.deploy.backends.sim import SimBackend
 from virl_quad.deploy.harness import export_untrained
 from virl_quad.deploy.protocol import JointCommand, MsgType
 from virl_quad.deploy.serve import PolicyRunner, check_announce
-from virl_quad.envs.observation import policy_observation
+from virl_quad.policy import ActionMap, policy_observation, yaw
 from virl_quad.policy_io import load_policy
 
 
@@ -67,18 +67,18 @@ def test_runner_uses_the_training_observation_and_skips_bad_states(untrained):
     st.gyro, st.dq = np.array([0.1, -0.2, 0.3]), rng.normal(0.0, 2.0, 12)
     unit = np.array([0.05, -0.1, 0.02, 1.0]) / np.linalg.norm([0.05, -0.1, 0.02, 1.0])
     st.quat = 1.04 * unit                                  # off unit norm: the runner normalises it
-    last = np.zeros(12)
+    mine = ActionMap(spec, untrained.contract)             # the training env's map, run beside the server's
+    mine.reset(st.q, 0.0)
     for k in range(3):
         out, reason = runner.handle(P.encode_state(st, 10 + k, active=True))
         assert reason == "" and out is not None
         msg = P.decode(out, expect=MsgType.COMMAND)
-        obs = policy_observation(spec, unit, st.gyro, st.q, st.dq, last, (k % 40) / 40)
-        action = untrained.act(obs)
-        np.testing.assert_allclose(msg.body.q_target, untrained.joint_targets(action))
+        obs = policy_observation(spec, unit, st.gyro, st.q, st.dq, mine.last_action, mine.phase, yaw(unit))
+        assert mine.phase == pytest.approx((k % 40) / 40)  # one cycle per 40-frame demonstration
+        np.testing.assert_allclose(msg.body.q_target, mine.step(untrained.act(obs)))
         np.testing.assert_array_equal(msg.body.kp, untrained.meta["kp"])
         np.testing.assert_array_equal(msg.body.tau_ff, np.zeros(12))
         assert msg.body.ref_seq == 10 + k
-        last = np.clip(action, -untrained.meta["action_clip"], untrained.meta["action_clip"])
     bad = P.RobotState.zeros(spec.default_pose)
     bad.dq[4] = np.nan
     assert runner.handle(P.encode_state(bad, 20, active=True)) == (None, "non_finite_state")
@@ -100,16 +100,19 @@ def test_runner_clock_starts_at_the_first_active_state(untrained):
     st.dq = np.random.default_rng(1).normal(0.0, 1.0, 12)   # non-zero input: a non-zero action
     runner = PolicyRunner(untrained)
     first = untrained.act(policy_observation(spec, st.quat, st.gyro, st.q, st.dq, np.zeros(12), 0.0))
+    mine = ActionMap(spec, untrained.contract)
+    mine.reset(st.q, 0.0)
+    want = mine.step(first)                                      # an episode's first target from this state
     seq = iter(range(1, 100))
     for _ in range(5):                                           # ramping: not applied
         out, _ = runner.handle(P.encode_state(st, next(seq)))
-        np.testing.assert_allclose(P.decode(out).body.q_target, untrained.joint_targets(first))
-        assert runner.k == 0 and not runner.last_action.any()
+        np.testing.assert_allclose(P.decode(out).body.q_target, want)
+        assert runner.k == 0 and not runner.last_action.any() and runner.phase() == 0.0
     for k in range(3):                                           # ACTIVE: the episode runs
         runner.handle(P.encode_state(st, next(seq), active=True))
-        assert runner.k == k + 1 and runner.last_action.any()
+        assert runner.k == k + 1 and runner.last_action.any() and runner.phase() == pytest.approx((k + 1) / 40)
     runner.handle(P.encode_state(st, next(seq)))                 # DAMPING: back to the start
-    assert runner.k == 0 and not runner.last_action.any()
+    assert runner.k == 0 and not runner.last_action.any() and runner.phase() == 0.0
     legacy = PolicyRunner(untrained)
     legacy.gate_on_active = False                                # a HAL without active_flag
     legacy.handle(P.encode_state(st, 1))

@@ -22,7 +22,8 @@ def test_is_rsl_rl_vec_env(venv) -> None:
     assert isinstance(venv, VecEnv)
     obs = venv.get_observations()
     assert set(obs.keys()) >= {"policy", "privileged", "agent_image"}
-    assert obs["policy"].shape == (4, 42) and obs["agent_image"].dtype == torch.uint8
+    assert obs["policy"].shape == (4, 44) and obs["agent_image"].dtype == torch.uint8   # no demo: no phase
+    assert venv.num_actions == 12 and venv.contract.tg is None
     assert venv.max_episode_length == 5  # 0.1 s at 50 Hz
 
 
@@ -82,3 +83,20 @@ def test_bad_input() -> None:
     with pytest.raises(ValueError, match="actions must be"):
         env.step(torch.zeros(3, 12))
     env.close()
+
+
+def test_a_trajectory_generator_takes_14_actions() -> None:
+    from virl_quad import robots
+    from virl_quad.demo.gaits import gait_params
+    from virl_quad.training.prior import gait_tg
+
+    tg = gait_tg(robots.get("pupper"), gait_params("pupper", "trot"))
+    env = QuadrupedVecEnv("pupper", 2, num_workers=0, seed=0, episode_seconds=0.1, randomize=False, render=False, tg=tg)
+    try:
+        assert env.num_actions == 14 and env.contract.tg == tg and env.cfg["tg"] == tg.to_dict()
+        assert env.get_observations()["policy"].shape == (2, 48)       # 14 last actions, the TG's phase
+        env.step(torch.zeros(2, 14))
+        with pytest.raises(ValueError, match="14"):
+            env.step(torch.zeros(2, 12))
+    finally:
+        env.close()

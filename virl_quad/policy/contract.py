@@ -118,11 +118,11 @@ class PolicyContract:
         size = meta.get("action_size", seen.get("last_action", 12))
         if size not in (12, 14) or isinstance(size, bool):
             raise ValueError(f"policy action size {size!r} is not 12 (joint offsets) or 14 (TG residuals + modulation)")
+        tg_dict = meta.get("tg")
+        if tg_dict is None and 14 in (size, seen.get("last_action")):
+            raise ValueError("policy metadata lacks its trajectory generator ('tg'): its 14 actions need one")
         if seen.get("last_action", size) != size:
             raise ValueError(f"policy action size {size} contradicts its observed last action of {seen['last_action']}")
-        tg_dict = meta.get("tg")
-        if tg_dict is None and size == 14:
-            raise ValueError("policy metadata lacks its trajectory generator ('tg'): its 14 actions need one")
         if tg_dict is None and "phase_sin_cos" in seen and meta.get("phase_hz") is None:
             raise ValueError("policy metadata lacks its trajectory generator ('tg') or phase clock ('phase_hz'): "
                              "its observation has a phase")
