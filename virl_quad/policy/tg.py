@@ -154,6 +154,7 @@ class TrajectoryGenerator:
             self.neutral_xy = np.asarray(params.neutral_xy, dtype=np.float64)
         self.stance_z = self.legs.origin[:, 2] - params.stance_height               # m (4,)
         self.offsets = np.asarray(params.offsets, dtype=np.float64)
+        self._leg = [tuple(float(v) for v in row) for row in zip(self.offsets, *self.neutral_xy.T, self.stance_z)]
         self._check_reach()
 
     def _check_reach(self) -> None:
@@ -175,5 +176,24 @@ class TrajectoryGenerator:
                               self.neutral_xy, self.stance_z)
 
     def joint_targets(self, phase: float | np.ndarray, amplitude: float = 1.0) -> np.ndarray:
-        """Joint angles (rad, ``(12,)`` or ``(..., 12)``) that put the feet on the TG trajectory."""
+        """Joint angles (rad, ``(12,)`` for a scalar phase, ``(..., 12)`` for phases ``(..., 1)``)
+        that put the feet on the TG trajectory."""
+        if np.ndim(phase) == 0:                  # one pose (the control loop): plain floats, same formulas
+            return self._joint_targets_one(float(phase), float(amplitude))
         return self.legs.inverse(self.foot_positions(phase, amplitude))
+
+    def _joint_targets_one(self, phase: float, amplitude: float) -> np.ndarray:
+        p = self.params
+        length, lift, duty = p.step_length * amplitude, p.swing_height * amplitude, p.duty
+        out = []
+        for leg, (offset, nx, ny, sz) in enumerate(self._leg):
+            phi = (phase + offset) % 1.0
+            if phi < duty:                       # stance: straight back at constant speed
+                x, z = 0.5 * length - length * phi / duty, sz
+            else:                                # swing: cycloid forward, lifted
+                s = (phi - duty) / (1.0 - duty)
+                ang = 2.0 * math.pi * s
+                x = length * ((s - math.sin(ang) / (2.0 * math.pi)) - (1.0 - duty) * s) / duty - 0.5 * length
+                z = sz + 0.5 * lift * (1.0 - math.cos(ang))
+            out.extend(self.legs.inverse_leg(leg, nx + x, ny, z))
+        return np.array(out)
