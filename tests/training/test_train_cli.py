@@ -71,6 +71,36 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     assert p.returncode == 2 and "renders" in p.stderr and "Traceback" not in p.stderr, p.stderr[-2000:]
 
 
+def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
+    """--tg: the policy is a residual on the trajectory generator fitted to the demonstration; the
+    run, its resume, its export and the policy server all use that TG (14 actions)."""
+    from virl_quad import robots
+    from virl_quad.demo.gaits import gait_params
+    from virl_quad.deploy import protocol as P
+    from virl_quad.deploy.serve import PolicyRunner
+    from virl_quad.training.prior import gait_tg
+
+    run_dir = tmp_path / "run"
+    p = run("virl_quad.train", "--robot", "pupper", "--tg", "--reward", "oracle", "--iterations", "1",
+            "--run-dir", str(run_dir), *TINY)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "trajectory generator: fitted to the reference motion" in p.stdout, p.stdout[-2000:]
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2")
+    assert p.returncode == 0 and "resumed at iteration 1" in p.stdout, p.stderr[-2000:]
+    out = tmp_path / "tg.pt"
+    p = run("virl_quad.export", str(run_dir), "--out", str(out))
+    assert p.returncode == 0, p.stderr[-2000:]
+    policy = load_policy(out)
+    spec = robots.get("pupper")
+    want = gait_tg(spec, gait_params("pupper", "trot"))
+    tg = policy.contract.tg
+    assert policy.action_size == 14 and tg.offsets == want.offsets and tg.duty == pytest.approx(want.duty)
+    runner = PolicyRunner(policy)
+    cmd, reason = runner.handle(P.encode_state(P.RobotState.standing(spec), 1, active=True))
+    assert reason == "" and np.all(np.isfinite(P.decode(cmd).body.q_target))
+    assert runner.last_action.shape == (14,)
+
+
 def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     cmd = [sys.executable, "-m", "virl_quad.train", "--robot", "pupper", "--iterations", "200",
