@@ -7,7 +7,7 @@ its camera frames are a physically simulated good imitation to show a distance m
     target = q_ref(t + lead) + gain * (q_ref(t) - q)          (rad)
 
 sent through the environment's own action space (scale, clip, rate limit, PD gains,
-torque limits): PD tracking made (1 + gain) times stiffer by feedback on the target,
+torque limits; with a trajectory generator as the residual on its next pose): PD tracking made (1 + gain) times stiffer by feedback on the target,
 with the feed-forward reference ``lead`` s ahead to make up for the PD lag.
 """
 
@@ -35,4 +35,5 @@ def tracker_action(env, gain: float = DEFAULT_GAIN, lead: float = DEFAULT_LEAD, 
     q_ref = motion.state_at(t).q
     q = u.state.q if q is None else np.asarray(q, dtype=np.float64)
     target = motion.state_at(t + lead).q + gain * (q_ref - q)
-    return (target - u.robot.default_pose) / u.action_scale
+    residual = (target - u.actions.base_target()) / u.action_scale    # base: default pose, or the TG's next pose
+    return np.concatenate([residual, np.zeros(u.actions.size - 12)])  # TG modulation (if any) left at 1
