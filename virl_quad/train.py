@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import signal
 import sys
@@ -169,7 +170,6 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None) -> dict:
 
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
-    from virl_quad.demo.score import evaluate
     from virl_quad.envs.vec_env import QuadrupedVecEnv
     from virl_quad.training.rewards import EnvReward, LearnedReward
     from virl_quad.training.runner import VirlRunner
@@ -180,12 +180,12 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         raise UserError("--reward oracle needs a demonstration with a reference motion (a gait or motion file)")
     it0 = int(resume_data["iteration"]) if resume_data else 0
     workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
-    actions = _action_options(args, demo, resume_data)
+    action_options = _action_options(args, demo, resume_data)
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
                           oracle_reward=oracle, ground=args.ground, render=not oracle,   # oracle: no frames needed
-                          speed_strip=args.speed_strip, **actions)
+                          speed_strip=args.speed_strip, **action_options)
     source = EnvReward() if oracle else LearnedReward(args.reward, _frames(demo, args), args.num_envs,
                                                       args.reward_updates, args.seed, args.device,
                                                       lr=args.reward_lr, cyclic=demo.loop,
@@ -197,12 +197,9 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                                                       speed_strip=args.speed_strip,
                                                       speed_shift_weight=args.speed_shift_weight)
 
-    def evaluator(policy):
-        return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                        episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground,
-                        **env.contract.env_overrides())
-
-    runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args), evaluate=evaluator,
+    actions = env.contract.env_overrides()        # the run's own action facts (TG included)
+    runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
+                        evaluate=lambda policy: _evaluate(args, demo, policy, actions),
                         device=args.device)
     return demo, env, runner
 
@@ -218,50 +215,80 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     if not args.device.startswith("cuda"):
         # One thread: the env workers own the other cores, and an oversubscribed torch is 10x slower.
         torch.set_num_threads(1)
-    print(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
-          f"run_dir={run_dir}", flush=True)
     demo, env, runner = build(args, run_dir, data)
+    log = RunLog(run_dir / "train.log")
+    log(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
+        f"run_dir={run_dir}")
+    (run_dir / "config.json").write_text(json.dumps(to_dict(args), indent=2) + "\n")
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` checkpoints like Ctrl-C
     try:
         if data is not None:
             runner.restore(data)
-            print(f"resumed at iteration {runner.current_learning_iteration} "
-                  f"({runner.env_steps:,d} env steps)", flush=True)
+            log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps)")
         elif args.reward_warmup > 0 and hasattr(runner.reward_source, "warm_up"):
-            runner.reward_source.warm_up(args.reward_warmup, log=lambda s: print(s, flush=True))
-        print(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
-              f"{', with reference motion' if demo.motion is not None else ''}", flush=True)
-        runner.train(args.iterations, args.minutes, args.save_every, args.eval_every,
-                     log=lambda s: print(s, flush=True))
+            runner.reward_source.warm_up(args.reward_warmup, log=log)
+        log(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
+            f"{', with reference motion' if demo.motion is not None else ''}")
+        if not runner.standing and demo.motion is not None:
+            from virl_quad.evaluate import zero_policy
+
+            runner.standing = _evaluate(args, demo, zero_policy)
+            log(f"holding the default pose scores {runner.standing['total']:.3f} (the bar: 1.00x standing), "
+                f"speed {runner.standing['speed_ratio']:.2f}, falls {runner.standing['falls']}")
+        runner.train(args.iterations, args.minutes, args.save_every, args.eval_every, log=log)
     finally:
         env.close()
-    finish(args, run_dir, demo, runner)
+    finish(args, run_dir, demo, runner, log)
     return 0
+
+
+class RunLog:
+    """Progress lines on stdout and appended to the run's ``train.log``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __call__(self, line: str) -> None:
+        """Print ``line`` and append it to the log file."""
+        print(line, flush=True)
+        with open(self.path, "a") as f:
+            f.write(line + "\n")
+
+
+def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dict:
+    """The run's ground-truth evaluation of ``policy`` (obs dict -> action); ``actions``: the env
+    options of its action space (the run's contract; None: the defaults, 12 offsets from the
+    default pose)."""
+    from virl_quad.demo.score import evaluate
+
+    return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
+                    episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground,
+                    **(actions or {}))
 
 
 def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def finish(args: TrainArgs, run_dir: Path, demo, runner) -> None:
+def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     """Final evaluation, report.json and side-by-side video."""
-    from virl_quad.demo.score import evaluate
     from virl_quad.training.report import side_by_side_video, write_report
-    from virl_quad.training.runner import actor_policy
+    from virl_quad.training.runner import actor_policy, eval_summary
 
-    print("final evaluation ...", flush=True)
+    log("final evaluation ...")
     policy = actor_policy(runner.alg.get_policy().eval())
     actions = runner.env.contract.env_overrides()          # the run's own action facts (TG included)
-    final = evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                     episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground, **actions)
+    final = _evaluate(args, demo, policy, actions)
     report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
-              "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final}
+              "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final,
+              "standing": runner.standing}
     write_report(run_dir / "report.json", report)
-    print(f"report: {run_dir / 'report.json'} (score {final.get('total', float('nan')):.3f}, "
-          f"survival {final.get('survival_fraction', float('nan')):.2f})", flush=True)
+    summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),
+                            "iteration": runner.current_learning_iteration}, runner.standing)
+    log(f"report: {run_dir / 'report.json'} ({summary}; survival {final.get('survival_fraction', float('nan')):.2f})")
     if args.video:
         out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground, **actions)
-        print(f"video: {out}", flush=True)
+        log(f"video: {out}")
 
 
 def cli(argv: list[str] | None = None) -> None:

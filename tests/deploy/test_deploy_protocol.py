@@ -148,12 +148,31 @@ def _json_frame(mtype: MsgType, payload: bytes) -> bytes:
     (lambda d: _json_frame(MsgType.ARM, b'{"x":NaN}'), "bad_payload"),
     (lambda d: _json_frame(MsgType.ESTOP, b"\xff\xfe"), "bad_payload"),
     (lambda d: _json_frame(MsgType.ESTOP, b"[" * 100000), "bad_size"),
+    (lambda d: _json_frame(MsgType.ARM, b'{"robot_id":"a","robot_id":"b"}'), "bad_payload"),   # duplicated key
+    (lambda d: _json_frame(MsgType.ARM, b'{"robot_id":"a","t":1e400}'), "bad_payload"),       # parses to inf
+    (lambda d: _json_frame(MsgType.ARM, b'{"robot_id":"a","t":{"u":1,"u":2}}'), "bad_payload"),
 ])
 def test_each_protocol_error_reason(make, reason):
     data = make(P.encode_command(_cmd(), seq=5))
     with pytest.raises(ProtocolError) as e:
         decode(data, expect=MsgType.COMMAND if reason == "wrong_type" else None)
     assert e.value.reason == reason and reason in P.REASONS
+
+
+def test_framing_is_checked_before_magic_version_and_type():
+    """PROTOCOL.md section 7: every bad_size condition comes first. A COMMAND whose length field
+    lies (500 for 392 bytes) with a correct CRC is bad_size, whatever its magic, version or type."""
+    good = P.encode_command(_cmd(), seq=5)
+    for fields in (dict(magic=b"XIRL"), dict(version=7), dict(mtype=99), dict(magic=b"XIRL", version=0, mtype=0), {}):
+        data = _reframe(good, plen=500, **fields)
+        with pytest.raises(ProtocolError) as e:
+            decode(data)
+        assert e.value.reason == "bad_size", fields
+    # a known binary type with a consistent length field but the wrong size: bad_size before bad_magic
+    short = _reframe(good, magic=b"XIRL", plen=391, payload=good[32:-1])
+    with pytest.raises(ProtocolError) as e:
+        decode(short)
+    assert e.value.reason == "bad_size"
 
 
 def test_decode_rejects_non_bytes_and_oversized_json():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -299,3 +300,92 @@ def test_only_a_valid_arm_for_this_robot_rearms(pupper):
     assert ctl.receive_arm(good, "pupper-01")
     ctl.tick(RobotState.standing(pupper))
     assert ctl.mode == Mode.RAMP
+
+
+def _arm(seq: int = 5) -> bytes:
+    return P.encode_json(MsgType.ARM, {"robot_id": "pupper-01"}, seq)
+
+
+def _damped(spec) -> SafetyController:
+    ctl = SafetyController(spec)
+    ctl.estop("first")
+    ctl.tick(RobotState.standing(spec))
+    assert ctl.mode == Mode.DAMPING
+    return ctl
+
+
+@pytest.mark.parametrize("order", ["arm_then_estop", "estop_then_arm"])
+def test_an_estop_cancels_every_arm_of_its_period_whatever_the_order(pupper, order):
+    """PROTOCOL.md section 8: within one period the E-stop wins, before or after the ARM."""
+    ctl = _damped(pupper)
+    ctl.begin_period()
+    for what in order.split("_then_"):
+        ctl.receive_arm(_arm(), "pupper-01") if what == "arm" else ctl.receive_estop(
+            P.encode_json(MsgType.ESTOP, {"reason": "stop!"}, 9))
+    for _ in range(3):          # nothing left to take in the following periods either
+        ctl.begin_period()
+        ctl.tick(RobotState.standing(pupper))
+        assert ctl.mode == Mode.DAMPING and ctl.fault == "first"
+    ev = ctl.status()["events"]
+    assert ev["arm_received"] == 1 and ev["arm_cancelled"] == 1 and "arm" not in ev, ev
+    assert ev["estop_received"] == 1
+
+
+def test_an_estop_cancels_an_arm_taken_at_the_start_of_its_period(pupper):
+    ctl = _damped(pupper)
+    assert ctl.receive_arm(_arm(), "pupper-01")
+    assert ctl.begin_period()                 # the ARM of the closed period is taken ...
+    ctl.estop("stop!")                        # ... and an E-stop arrives before the tick
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.DAMPING and ctl.status()["events"]["arm_cancelled"] == 1
+
+
+def test_an_arm_in_a_later_period_than_the_estop_rearms(pupper):
+    ctl = _damped(pupper)
+    ctl.begin_period()
+    ctl.estop("stop!")
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.DAMPING
+    ctl.begin_period()
+    assert ctl.receive_arm(_arm(), "pupper-01")
+    ctl.tick(RobotState.standing(pupper))     # taken at the next period's start
+    assert ctl.mode == Mode.DAMPING
+    assert ctl.begin_period()
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.RAMP and ctl.fault == ""
+
+
+def test_arm_in_ramp_or_active_is_an_event_not_a_rejection(pupper):
+    ctl, _ = make_active(pupper)
+    assert not ctl.receive_arm(_arm(), "pupper-01")
+    st = ctl.status()
+    assert st["events"]["arm_ignored"] == 1 and st["events"]["arm_received"] == 1
+    assert st["rejected_other"] == {} and st["rejected"] == {} and st["mode"] == "ACTIVE"
+
+
+def test_an_estop_in_idle_damps_and_a_delete_sample_counts(pupper):
+    ctl = SafetyController(pupper)
+    ctl.receive_arm(None, "pupper-01")        # a Zenoh DELETE on arm: counted, ignored
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.IDLE
+    ctl.receive_estop(None)                   # a Zenoh DELETE on estop: an E-stop
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.DAMPING and ctl.fault == "estop"
+    assert ctl.rejected_other == {"arm:delete": 1, "estop:delete": 1}
+
+
+def test_limits_are_the_ones_enforced(pupper):
+    ctl = SafetyController(pupper, SafetyConfig(gain_factor=1.5, max_step=0.1))
+    lim = ctl.limits()
+    json.dumps(lim, allow_nan=False)
+    np.testing.assert_allclose(lim["kp_max"], 1.5 * pupper.kp)
+    assert lim["max_step"] == 0.1 and lim["tau_max"] == pupper.torque_limit.tolist()
+    # a command at exactly the published limits is safe; one beyond any of them is not
+    at = JointCommand(np.array(lim["q_upper"]), np.array(lim["kp_max"]), np.array(lim["kd_max"]),
+                      np.array(lim["tau_max"]))
+    cfg = ctl.config
+    assert is_safe_command(at, pupper, cfg)
+    for field, delta in (("q_target", 1e-3), ("kp", 1e-3), ("kd", 1e-3), ("tau_ff", 1e-3)):
+        over = JointCommand(*(np.array(getattr(at, f)) for f in ("q_target", "kp", "kd", "tau_ff")))
+        getattr(over, field)[0] += delta
+        assert not is_safe_command(over, pupper, cfg), field

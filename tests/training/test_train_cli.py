@@ -43,6 +43,11 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     net2 = data["reward"]["net"]
     report = json.loads((run_dir / "report.json").read_text())
     assert 0 <= report["evaluation"]["total"] <= 1
+    # the run folder says how it was made and what it printed; the progress line reads as a person needs
+    assert json.loads((run_dir / "config.json").read_text())["robot"] == robot
+    log = (run_dir / "train.log").read_text()
+    assert "it     2/2" in log and "holding the default pose scores" in log
+    assert report["standing"]["total"] > 0 and "x standing, speed" in p.stdout, p.stdout[-2000:]
     # resume continues from iteration 2
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
     assert p.returncode == 0, p.stderr[-2000:]

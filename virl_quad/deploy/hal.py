@@ -29,7 +29,7 @@ import struct
 import sys
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +46,11 @@ from virl_quad.deploy.protocol import JointCommand, MsgType, RobotState
 from virl_quad.deploy.safety import Mode, SafetyConfig, SafetyController
 
 _REF_SEQ = struct.Struct("<Q")          # COMMAND payload offset 0: ref_seq
+
+
+def _payload(sample: zenoh.Sample) -> bytes | None:
+    """A sample's payload; None for a DELETE (no message at all)."""
+    return None if sample.kind == zenoh.SampleKind.DELETE else sample.payload.to_bytes()
 
 
 @dataclass
@@ -95,8 +100,7 @@ class Hal:
         self._resp_ref = 0           # highest ref_seq of an accepted command answering a published state
         self._state_seq = 0          # sequence number of the newest state published
         self._resp_any = 0           # accepted commands with ref_seq 0 (unknown)
-        self._arms: deque[bytes] = deque(maxlen=16)   # ARM payloads, handled in the loop thread
-        self._announce = P.announce_body(spec, robot_id)
+        self._announce = P.announce_body(spec, robot_id, limits=self.ctl.limits())
         k = lambda topic: P.key(robot_id, topic)  # noqa: E731
         self.state_pub = SeqPublisher(session, robot_id, "state")
         self.status_pub = SeqPublisher(session, robot_id, "status")
@@ -149,24 +153,25 @@ class Hal:
 
     def _on_estop(self, sample: zenoh.Sample) -> None:
         self.log("E-stop received")
-        self._guard("estop", self.ctl.receive_estop, sample.payload.to_bytes())
+        self._guard("estop", self.ctl.receive_estop, _payload(sample))
 
     def _on_arm(self, sample: zenoh.Sample) -> None:
-        self._guard("arm", lambda: self._arms.append(sample.payload.to_bytes()))
+        self._guard("arm", self.ctl.receive_arm, _payload(sample), self.robot_id)
 
-    def _handle_arms(self) -> None:
-        """ARMs are handled at the start of a period, in the loop thread, so that the sim can
-        be reset (``reset_on_arm``) before the tick that starts the ramp measures the pose."""
-        while self._arms:
-            ok = self.ctl.receive_arm(self._arms.popleft(), self.robot_id)
-            self.log("ARM accepted" if ok else "ARM ignored (see STATUS rejected_other / events)")
-            if ok and self.config.reset_on_arm:
-                try:
-                    self.backend.reset()           # type: ignore[attr-defined]  (sim only)
-                    self.log("simulated robot put back on its feet")
-                except Exception as e:
-                    self.errors["reset"] += 1
-                    self.log.once("reset", f"sim reset failed (counted): {e}")
+    def _begin_period(self) -> None:
+        """Open the safety layer's period (ARMs received since the last one, with no E-stop in
+        their period, take effect at this period's tick); with ``reset_on_arm`` the sim robot is
+        put back on its feet first, so that the tick starting the ramp measures that pose."""
+        if not self.ctl.begin_period():
+            return
+        self.log("ARM taken: ramp to the default pose")
+        if self.config.reset_on_arm:
+            try:
+                self.backend.reset()           # type: ignore[attr-defined]  (sim only)
+                self.log("simulated robot put back on its feet")
+            except Exception as e:
+                self.errors["reset"] += 1
+                self.log.once("reset", f"sim reset failed (counted): {e}")
 
     def _on_announce_query(self, query: zenoh.Query) -> None:
         def reply(q: zenoh.Query) -> None:
@@ -260,7 +265,7 @@ class Hal:
         mode = self.ctl.mode
         while not stop.is_set():
             t0 = time.monotonic()
-            self._handle_arms()
+            self._begin_period()
             state = self._read()
             with self._cv:
                 any_before = self._resp_any

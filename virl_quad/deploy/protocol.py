@@ -19,6 +19,7 @@ ESTOP and ARM carry UTF-8 JSON objects. :func:`decode` raises
 from __future__ import annotations
 
 import json
+import math
 import struct
 import time
 import zlib
@@ -271,14 +272,18 @@ def encode_json(mtype: MsgType, body: dict[str, Any], seq: int, stamp_ns: int | 
     return _frame(mtype, seq, payload, stamp_ns)
 
 
-def announce_body(spec: Any, robot_id: str, role: str = "hal") -> dict[str, Any]:
-    """ANNOUNCE payload for a RobotSpec: robot name, id, joint order, control period (s), and
-    ``active_flag``: this HAL sets ``STATE_FLAG_ACTIVE`` on the states whose answers it applies."""
-    return {
+def announce_body(spec: Any, robot_id: str, role: str = "hal", limits: dict[str, Any] | None = None) -> dict[str, Any]:
+    """ANNOUNCE payload for a RobotSpec: robot name, id, joint order, control period (s),
+    ``active_flag`` (this HAL sets ``STATE_FLAG_ACTIVE`` on the states whose answers it applies)
+    and, when given, the ``limits`` its safety layer enforces (``SafetyController.limits``)."""
+    body = {
         "robot": spec.name, "robot_id": check_robot_id(robot_id), "role": role,
         "protocol_version": PROTOCOL_VERSION, "joint_order": list(spec.joint_names),
         "control_dt": float(spec.control_dt), "active_flag": True,
     }
+    if limits is not None:
+        body["limits"] = limits
+    return body
 
 
 # ----------------------------------------------------------------------------- decoding
@@ -304,9 +309,10 @@ def decode(data: Any, expect: MsgType | None = None) -> Message:
 
     ``data``: bytes, bytearray, memoryview or a zenoh.ZBytes (``sample.payload``).
 
-    Checks, in order: size >= header (bad_size), magic (bad_magic), version (bad_version),
-    type known (bad_type), payload_len == bytes received and == the type's fixed size
-    (bad_size), CRC (bad_crc), then ``expect`` (wrong_type) and JSON syntax (bad_payload).
+    Checks, in the order of ``deploy/PROTOCOL.md`` section 7: the framing (bad_size: at least a
+    header, payload_len == bytes received, the fixed size of a known binary type, the JSON
+    limit), magic (bad_magic), version (bad_version), type known (bad_type), CRC (bad_crc),
+    then ``expect`` (wrong_type) and the JSON payload (bad_payload).
     """
     buf, mt, seq, stamp_ns = _checked_frame(data, expect)
     payload = buf[HEADER_SIZE:]
@@ -336,18 +342,19 @@ def _checked_frame(data: Any, expect: MsgType | None) -> tuple[bytes, MsgType, i
     if len(buf) < HEADER_SIZE:
         raise ProtocolError("bad_size", f"{len(buf)} bytes, header needs {HEADER_SIZE}")
     magic, version, mtype, seq, stamp_ns, plen, crc = HEADER.unpack_from(buf)
+    # framing first: every length check (they need only the length and type fields)
+    if plen != len(buf) - HEADER_SIZE:
+        raise ProtocolError("bad_size", f"payload_len {plen}, received {len(buf) - HEADER_SIZE}")
+    mt = _TYPE_OF_CODE.get(mtype)
+    want = _FIXED_SIZE.get(mt) if mt is not None else None
+    if (want is not None and plen != want) or (mt in _JSON_TYPES and plen > MAX_JSON_PAYLOAD):
+        raise ProtocolError("bad_size", f"{mt.name} payload of {plen} bytes")
     if magic != MAGIC:
         raise ProtocolError("bad_magic", repr(magic))
     if version != PROTOCOL_VERSION:
         raise ProtocolError("bad_version", f"{version} != {PROTOCOL_VERSION}")
-    mt = _TYPE_OF_CODE.get(mtype)
     if mt is None:
         raise ProtocolError("bad_type", str(mtype))
-    if plen != len(buf) - HEADER_SIZE:
-        raise ProtocolError("bad_size", f"payload_len {plen}, received {len(buf) - HEADER_SIZE}")
-    want = _FIXED_SIZE.get(mt)
-    if (want is not None and plen != want) or (mt in _JSON_TYPES and plen > MAX_JSON_PAYLOAD):
-        raise ProtocolError("bad_size", f"{mt.name} payload of {plen} bytes")
     view = memoryview(buf)   # CRC over the buffer without copying it
     if zlib.crc32(view[HEADER_SIZE:], zlib.crc32(view[:_HEADER_NO_CRC])) != crc:
         raise ProtocolError("bad_crc")
@@ -380,9 +387,29 @@ def _reject_constant(name: str) -> None:
     raise ValueError(f"non-finite JSON number {name}")
 
 
+def _finite_float(text: str) -> float:
+    """A JSON number as float; ValueError when it overflows to infinity (e.g. ``1e400``)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"JSON number {text[:20]} is not a finite double")
+    return value
+
+
+def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object as dict; ValueError on a duplicated member name (which value wins is
+    ambiguous between parsers, so neither does)."""
+    seen: set[str] = set()
+    for name, _ in pairs:
+        if name in seen:
+            raise ValueError(f"duplicated member {name[:40]!r}")
+        seen.add(name)
+    return dict(pairs)
+
+
 def _decode_json(p: bytes) -> dict[str, Any]:
     try:
-        body = json.loads(p.decode("utf-8"), parse_constant=_reject_constant)
+        body = json.loads(p.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float,
+                          object_pairs_hook=_unique_object)
     except (UnicodeDecodeError, ValueError, RecursionError) as e:
         raise ProtocolError("bad_payload", f"JSON: {e}") from None
     if not isinstance(body, dict):

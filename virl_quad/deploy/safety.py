@@ -14,6 +14,12 @@ Modes::
 
 DAMPING (kp = 0, kd = damping gains, no feed-forward) is latched: only an
 explicit :meth:`SafetyController.arm` leaves it.
+
+E-stop and ARM requests are gathered per control period: a period opens at
+:meth:`SafetyController.begin_period` (or at the tick itself when the caller never opens
+one). An E-stop cancels every ARM requested in its own period, before or after it in
+arrival order, and an ARM already taken at the start of its period: an E-stop always
+wins over every ARM received before it in the same period or earlier.
 """
 
 from __future__ import annotations
@@ -122,8 +128,11 @@ class SafetyController:
         self._last: JointCommand = self._zero_torque(np.array(spec.default_pose, dtype=np.float64))
         # the q_target of IDLE/DAMPING commands is irrelevant to the motor (kp = 0) but is kept
         # within the joint limits so that every output passes is_safe_command
-        self._arm_pending = False
-        self._estop_pending = ""
+        self._arm_requested = False               # an ARM arrived in the open period
+        self._arm_pending = False                 # taken at begin_period: RAMP at the next tick
+        self._estop_pending = ""                  # DAMPING at the next tick, with this fault text
+        self._estop_in_period = False             # an E-stop arrived in the open period
+        self._period_open = False                 # begin_period() was called since the last tick
 
     # ------------------------------------------------------------------ inputs (any thread)
 
@@ -155,48 +164,86 @@ class SafetyController:
             return True
 
     def receive_estop(self, data: Any) -> None:
-        """Handle a sample from the estop key: E-stop whatever the payload (fail-safe);
-        a payload that does not decode as ESTOP is counted. Never raises."""
+        """Handle a sample from the estop key: E-stop whatever the payload (fail-safe). Every
+        sample counts in ``events["estop_received"]``; one that does not decode as ESTOP also
+        in ``rejected_other`` (``None``, a sample without payload such as a Zenoh DELETE, as
+        ``estop:delete``). Never raises."""
         reason = "estop"
         try:
+            if data is None:
+                raise ProtocolError("delete")
             body = decode(data, expect=MsgType.ESTOP).body
             if isinstance(body, dict) and isinstance(body.get("reason"), str) and body["reason"]:
                 reason = f"estop: {body['reason'][:80]}"
         except ProtocolError as e:
             with self._lock:
                 self.rejected_other[f"estop:{e.reason}"] += 1
+        with self._lock:
+            self.events["estop_received"] += 1
         self.estop(reason)
 
     def receive_arm(self, data: Any, robot_id: str) -> bool:
-        """Handle a sample from the arm key: re-arm only for a valid ARM message naming
-        ``robot_id``; anything else is counted and ignored. Never raises."""
+        """Handle a sample from the arm key: request re-arming only for a valid ARM message
+        naming ``robot_id`` (counted in ``events["arm_received"]``, then see :meth:`arm`);
+        anything else is counted in ``rejected_other`` (``arm:<reason>``, ``arm:wrong_robot``,
+        ``arm:delete`` for ``None``) and ignored. Never raises."""
         try:
+            if data is None:
+                raise ProtocolError("delete")
             body = decode(data, expect=MsgType.ARM).body
         except ProtocolError as e:
             with self._lock:
                 self.rejected_other[f"arm:{e.reason}"] += 1
             return False
-        if not isinstance(body, dict) or body.get("robot_id") != robot_id:
+        if body.get("robot_id") != robot_id:
             with self._lock:
                 self.rejected_other["arm:wrong_robot"] += 1
             return False
+        with self._lock:
+            self.events["arm_received"] += 1
         return self.arm()
 
     def estop(self, reason: str = "estop") -> None:
-        """Request an emergency stop: DAMPING from the next tick on, latched until arm()."""
+        """Request an emergency stop: DAMPING from the next tick on, latched until arm().
+        Cancels (``events["arm_cancelled"]``) every ARM of the open period and one taken at
+        its start."""
         with self._lock:
             self._estop_pending = reason or "estop"
+            self._estop_in_period = True
+            for attr in ("_arm_requested", "_arm_pending"):
+                if getattr(self, attr):
+                    setattr(self, attr, False)
+                    self.events["arm_cancelled"] += 1
 
     def arm(self) -> bool:
-        """Request (re-)arming: IDLE or DAMPING -> RAMP on the next tick. Returns False (and
-        does nothing) in RAMP or ACTIVE. Resets the sequence baseline: a restarted policy
-        may begin again from any sequence number."""
+        """Request (re-)arming: IDLE or DAMPING -> RAMP at the first tick after the next
+        :meth:`begin_period`. Returns False (and does nothing) in RAMP or ACTIVE
+        (``events["arm_ignored"]``) or when an E-stop arrived in the open period
+        (``events["arm_cancelled"]``). Re-arming resets the sequence baseline: a restarted
+        policy may begin again from any sequence number."""
         with self._lock:
             if self.mode in (Mode.RAMP, Mode.ACTIVE):
                 self.events["arm_ignored"] += 1
                 return False
-            self._arm_pending = True
+            if self._estop_in_period:
+                self.events["arm_cancelled"] += 1
+                return False
+            self._arm_requested = True
             return True
+
+    def begin_period(self) -> bool:
+        """Open a control period: ARMs of the closed period with no E-stop in it are taken,
+        to start the RAMP at the next tick unless an E-stop arrives first. Returns True if
+        the next tick will start a RAMP (a simulator may reset the robot before it)."""
+        with self._lock:
+            return self._begin_period()
+
+    def _begin_period(self) -> bool:
+        self._arm_pending = self._arm_requested and not self._estop_pending
+        self._arm_requested = False
+        self._estop_in_period = False
+        self._period_open = True
+        return self._arm_pending
 
     # ------------------------------------------------------------------ the control tick
 
@@ -206,13 +253,15 @@ class SafetyController:
         ``state`` is the latest measurement; pass None when the backend could not read one
         (in RAMP or ACTIVE that is a fault: DAMPING). Never raises on bad input."""
         with self._lock:
+            if not self._period_open:
+                self._begin_period()
+            self._period_open = False
             self.ticks += 1
             pending, self._pending = self._pending, None
             q_meas = self._safe_q(getattr(state, "q", None), fallback=self._last.q_target)
-            if self._estop_pending:
+            if self._estop_pending:                  # estop() has cancelled every earlier ARM
                 self._enter_damping(self._estop_pending, "estop")
                 self._estop_pending = ""
-                self._arm_pending = False
             elif self._arm_pending:
                 self._arm_pending = False
                 self.events["arm"] += 1
@@ -336,6 +385,22 @@ class SafetyController:
     def _damping(self, q: np.ndarray) -> JointCommand:
         kd = self.config.damping_kd_factor * np.asarray(self.spec.kd, dtype=np.float64)
         return JointCommand(np.array(q, dtype=np.float64), np.zeros(NUM_JOINTS), kd, np.zeros(NUM_JOINTS))
+
+    def limits(self) -> dict[str, Any]:
+        """The limits this controller enforces, JSON-ready (the ANNOUNCE's ``limits`` member):
+        joint limits (rad), maximum gains (N·m/rad, N·m·s/rad), torque limit (N·m), maximum
+        target step (rad per control period), watchdog (control periods), tilt limits (rad),
+        the DAMPING gain (N·m·s/rad) and the RAMP time (s)."""
+        s, c = self.spec, self.config
+        as_list = lambda a: np.asarray(a, dtype=np.float64).tolist()  # noqa: E731
+        return {
+            "q_lower": as_list(s.joint_lower), "q_upper": as_list(s.joint_upper),
+            "kp_max": as_list(c.gain_factor * np.asarray(s.kp)), "kd_max": as_list(c.gain_factor * np.asarray(s.kd)),
+            "tau_max": as_list(s.torque_limit), "max_step": float(c.max_step),
+            "watchdog_periods": int(c.watchdog_periods),
+            "max_roll": float(c.tilt_factor * s.max_roll), "max_pitch": float(c.tilt_factor * s.max_pitch),
+            "damping_kd": as_list(c.damping_kd_factor * np.asarray(s.kd)), "ramp_time": float(c.ramp_time),
+        }
 
     def status(self) -> dict[str, Any]:
         """Counters and mode, JSON-ready: the body of a STATUS message."""

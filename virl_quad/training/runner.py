@@ -33,6 +33,19 @@ def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
     return act
 
 
+def eval_summary(result: dict, standing: dict) -> str:
+    """The last ground-truth evaluation for a person: the score as a multiple of holding the
+    default pose (below 1x the policy is worse than standing still), the forward-speed ratio
+    to the demonstration and the falls, with the iteration it was taken at ("-" before one)."""
+    if "total" not in result:
+        return "-"
+    base = standing.get("total")
+    score = f"{result['total'] / base:.2f}x standing" if base else f"score {result['total']:.3f}"
+    episodes = int(result.get("episodes_run", 0))
+    falls = f"falls {int(result.get('falls', 0))}" + (f"/{episodes}" if episodes else "")
+    return f"{score}, speed {result.get('speed_ratio', float('nan')):.2f}, {falls} @{result.get('iteration', '?')}"
+
+
 class VirlRunner(OnPolicyRunner):
     """OnPolicyRunner with progress lines, atomic checkpoints and ground-truth evaluation."""
 
@@ -48,6 +61,7 @@ class VirlRunner(OnPolicyRunner):
         self.env_steps = 0
         self.wall_time = 0.0
         self.last_eval: dict = {}
+        self.standing: dict = {}      # the same evaluation of holding the default pose (the bar)
         self.writer = None
         self._episode_len = torch.zeros(env.num_envs)
         self._finished_lengths: list[float] = []
@@ -58,6 +72,7 @@ class VirlRunner(OnPolicyRunner):
         return {**self.alg.save(), "reward": self.reward_source.state_dict(), "config": self.config,
                 "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
                 "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
+                "standing": self.standing,
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
@@ -72,6 +87,7 @@ class VirlRunner(OnPolicyRunner):
         self.env_steps = int(data["env_steps"])
         self.wall_time = float(data["wall_time"])
         self.last_eval = dict(data.get("last_eval") or {})
+        self.standing = dict(data.get("standing") or {})
         checkpoint.set_rng_state(data["rng"])
 
     # -- the loop -----------------------------------------------------------------------------
@@ -138,7 +154,10 @@ class VirlRunner(OnPolicyRunner):
         finally:
             self.alg.train_mode()
         self.last_eval = {"iteration": self.current_learning_iteration,
+                          "episodes_run": len(result.get("episodes", [])),
                           **{k: float(v) for k, v in result.items() if isinstance(v, (int, float))}}
+        if self.standing.get("total"):
+            self.last_eval["score_vs_standing"] = self.last_eval.get("total", float("nan")) / self.standing["total"]
         for k, v in self.last_eval.items():
             self.writer.add_scalar(f"eval/{k}", v, self.current_learning_iteration)
         return self.last_eval
@@ -156,11 +175,10 @@ class VirlRunner(OnPolicyRunner):
         eta = per_it * (total - it)
         if minutes:
             eta = min(eta, max(60 * minutes - (time.time() - start_wall), 0.0))
-        score = self.last_eval.get("total")
-        score_txt = f"{score:.3f}@{self.last_eval['iteration']}" if score is not None else "-"
         dist = info.get("distance/total", float("nan"))
         log(f"it {it:5d}/{total} | steps {self.env_steps:9,d} | {sps:6.0f} st/s | reward {info['reward_mean']:.3f}"
-            f" | dist-loss {dist:.4f} | ep-len {ep_len:5.2f}s | score {score_txt} | ETA {eta / 60:5.1f} min")
+            f" | dist-loss {dist:.4f} | ep-len {ep_len:5.2f}s | eval {eval_summary(self.last_eval, self.standing)}"
+            f" | ETA {eta / 60:5.1f} min")
         w = self.writer
         w.add_scalar("train/reward_mean", info["reward_mean"], it)
         w.add_scalar("train/episode_seconds", ep_len, it)
