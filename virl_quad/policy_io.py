@@ -49,7 +49,7 @@ def metadata_for(spec: RobotSpec, contract: PolicyContract, demo: dict | None, s
 class NumpyMLP:
     """The exported actor (normaliser, Linear/ELU layers, identity output) evaluated in numpy.
 
-    A 50 Hz control loop calls the policy once per state; for a 44 -> 256 -> 128 -> 12 MLP,
+    A 50 Hz control loop calls the policy once per state; for a 46 -> 256 -> 128 -> 12 MLP,
     torch's per-call overhead is most of the time, and numpy does it in a fraction of it.
     Built only from a module of exactly that structure, and used only after it has
     reproduced the TorchScript output (see :func:`fast_path`)."""
