@@ -81,9 +81,10 @@ def _episode_options(k: int) -> dict | None:
 
 
 def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: int, rng: np.random.Generator,
-           args: DistillArgs, first_episode: int) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """Run ``steps`` control steps, executing the tracker with probability ``beta`` (else the
-    student), and return the observations, the tracker's (clipped) actions and statistics."""
+           args: DistillArgs, first_episode: int, motion=None) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """Run ``steps`` control steps, executing the tracker (of ``motion``, default the
+    demonstration's reference) with probability ``beta`` (else the student), and return the
+    observations, the tracker's (clipped) actions and statistics."""
     obs_out, act_out, travel, falls, episodes = [], [], [], 0, 0
     q_cols = policy_block("joint_pos_minus_default")
     k = first_episode
@@ -95,7 +96,7 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
         clip = u.cfg.action_clip
         while not done and len(obs_out) < steps:
             q_meas = obs["policy"][q_cols] + u.robot.default_pose     # rad, as the policy measures it
-            teacher = np.clip(tracker_action(env, args.gain, args.lead, q=q_meas), -clip, clip)
+            teacher = np.clip(tracker_action(env, args.gain, args.lead, motion=motion, q=q_meas), -clip, clip)
             obs_out.append(obs["policy"])
             act_out.append(teacher)
             if actor is None or rng.random() < beta:
@@ -161,18 +162,23 @@ def fit(actor: torch.nn.Module, obs: np.ndarray, act: np.ndarray, args: DistillA
     return loss_val
 
 
-def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
-    """Run DAgger; returns the student actor (eval mode) and per-round statistics."""
+def distil(args: DistillArgs, log=print, demo=None, env_options: dict | None = None,
+           motion=None) -> tuple[torch.nn.Module, dict]:
+    """Run DAgger; returns the student actor (eval mode) and per-round statistics.
+
+    ``demo``: the demonstration (default: loaded from ``args.demo``); ``env_options``: extra
+    ``envs.make`` options (e.g. the run's trajectory generator); ``motion``: what the teacher
+    tracks (anything with ``state_at(t).q``; default: the demonstration's reference motion)."""
     from virl_quad.export import fresh_actor
 
-    d = demo_lib.load(args.demo, args.robot)
-    if d.motion is None:
+    d = demo if demo is not None else demo_lib.load(args.demo, args.robot)
+    if d.motion is None and motion is None:
         raise UserError(f"demonstration {args.demo!r} has no reference motion: the tracker needs one")
     hidden = tuple(int(h) for h in args.hidden.split(","))
     rng, gen = np.random.default_rng(args.seed), torch.Generator().manual_seed(args.seed)
     ranges = {"latency": (0.0, args.max_latency)} if args.randomize else None
     pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, randomization=ranges, render=False, rsi=rsi,
-                           episode_seconds=10.0) for rsi in (False, True))
+                           episode_seconds=10.0, **(env_options or {})) for rsi in (False, True))
     contract = pair[0].unwrapped.contract
     actor = fresh_actor(contract, hidden, seed=args.seed)
     if args.blind_last_action:
@@ -184,7 +190,7 @@ def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
         for r in range(args.rounds):
             t0 = time.monotonic()
             beta = 0.5 ** r
-            o, a, stats = gather(pair, None if r == 0 else actor, beta, args.steps, rng, args, k)
+            o, a, stats = gather(pair, None if r == 0 else actor, beta, args.steps, rng, args, k, motion)
             k = stats.pop("next_episode")
             all_obs.append(o)
             all_act.append(a)
@@ -195,7 +201,7 @@ def distil(args: DistillArgs, log=print) -> tuple[torch.nn.Module, dict]:
             log(f"round {r}: beta {beta:.3f}, {stats['episodes']} episodes ({stats['falls']} fell), "
                 f"mean travel {stats['travel_m']:+.2f} m, {stats['pairs']} pairs, mse {loss:.4f}, "
                 f"{stats['seconds']:.0f} s")
-        _, _, final = gather(pair, actor, 0.0, args.steps, rng, args, k)
+        _, _, final = gather(pair, actor, 0.0, args.steps, rng, args, k, motion)
         final.pop("next_episode")
         log(f"student alone: {final['episodes']} episodes ({final['falls']} fell), "
             f"mean travel {final['travel_m']:+.2f} m")

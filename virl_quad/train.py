@@ -235,11 +235,37 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             runner.standing = _evaluate(args, demo, zero_policy)
             log(f"holding the default pose scores {runner.standing['total']:.3f} (the bar: 1.00x standing), "
                 f"speed {runner.standing['speed_ratio']:.2f}, falls {runner.standing['falls']}")
+        if data is None:
+            _warm_start(args, demo, runner, log)
         runner.train(args.iterations, args.minutes, args.save_every, args.eval_every, log=log)
     finally:
         env.close()
     finish(args, run_dir, demo, runner, log)
     return 0
+
+
+def _warm_start(args: TrainArgs, demo, runner, log) -> None:
+    """A new run: copy the trajectory generator's tracker into the actor (``--tg``), evaluate
+    it (the curve's first point), and fit the critic alone for the first iterations."""
+    from virl_quad import robots
+    from virl_quad.training.warm_start import distill_into
+
+    tg = runner.env.contract.tg
+    if tg is not None and args.warm_start_rounds > 0:
+        t0 = time.time()
+        student = distill_into(runner.alg.actor, robots.get(args.robot), demo, tg, args.hidden, args.seed,
+                               args.warm_start_rounds, args.warm_start_steps, log)
+        runner.wall_time += time.time() - t0
+        log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
+            f"{student['episodes']} episodes, mean travel {student['travel_m']:+.2f} m")
+        if demo.motion is not None:
+            from virl_quad.training.runner import eval_summary
+
+            runner.run_evaluation()
+            log(f"warm-started policy: {eval_summary(runner.last_eval, runner.standing)}")
+    if args.critic_warmup > 0:
+        runner.alg.freeze_actor(args.critic_warmup)
+        log(f"the first {args.critic_warmup} iterations fit the critic alone (actor frozen)")
 
 
 class RunLog:

@@ -28,6 +28,7 @@ class VirlPPO(PPO):
         self.reward_source = None  # attached by the runner: needs the demonstration
         self._time_outs: list[torch.Tensor] = []
         self.last_reward_info: dict[str, float] = {}
+        self.frozen_updates = 0    # coming updates that fit the critic alone (see freeze_actor)
 
     def attach_reward(self, source) -> None:
         """Set the reward source (see virl_quad.training.rewards)."""
@@ -54,3 +55,28 @@ class VirlPPO(PPO):
         info["reward_mean"] = float(new_rewards.mean())
         self.last_reward_info = info
         super().compute_returns(obs)
+
+    def freeze_actor(self, updates: int) -> None:
+        """Fit the critic alone in the next ``updates`` calls of :meth:`update`, at a fixed
+        learning rate: a warm-started actor is not moved by the advantages of an untrained
+        critic (they undo a warm start in a few iterations), and the KL-adaptive learning rate
+        does not climb while the actor's KL is held at zero."""
+        self.frozen_updates = int(updates)
+
+    def update(self) -> dict[str, float]:
+        """PPO's update, or the critic's alone while the actor is frozen (:meth:`freeze_actor`)."""
+        if self.frozen_updates <= 0:
+            return super().update()
+        self.frozen_updates -= 1
+        params = list(self.actor.parameters())
+        trainable = [p.requires_grad for p in params]
+        schedule, lr = self.schedule, self.learning_rate
+        for p in params:
+            p.requires_grad_(False)      # no gradient: Adam leaves them (and their moments) alone
+        self.schedule = "fixed"
+        try:
+            return super().update()
+        finally:
+            for p, t in zip(params, trainable):
+                p.requires_grad_(t)
+            self.schedule, self.learning_rate = schedule, lr

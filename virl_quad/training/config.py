@@ -52,6 +52,9 @@ class TrainArgs:
     init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
     video: bool = True                 # write the final side-by-side video (demonstration | agent)
+    warm_start_rounds: int = 4         # with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before PPO (0: start PPO from a fresh actor)
+    warm_start_steps: int = 4000       # control steps gathered per warm-start round
+    critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
     tg: bool = False                   # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
 
 
@@ -62,7 +65,12 @@ def validate(args: TrainArgs) -> None:
     robots.get(args.robot)
     if args.reward not in REWARDS:
         raise ValueError(f"unknown reward {args.reward!r}; choose one of: {', '.join(REWARDS)}")
-    for name in ("num_envs", "iterations", "steps_per_env", "save_every"):
+    for name in ("warm_start_rounds", "critic_warmup"):
+        if getattr(args, name) < 0:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
+    if not 0 < args.init_std <= 2:
+        raise ValueError(f"--init-std must lie in (0, 2] action units, got {args.init_std}")
+    for name in ("num_envs", "iterations", "steps_per_env", "save_every", "warm_start_steps"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.speed_shift_weight < 0:

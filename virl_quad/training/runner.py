@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import time
 from pathlib import Path
 from typing import Callable
@@ -72,7 +73,7 @@ class VirlRunner(OnPolicyRunner):
         return {**self.alg.save(), "reward": self.reward_source.state_dict(), "config": self.config,
                 "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
                 "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
-                "standing": self.standing,
+                "standing": self.standing, "frozen_updates": self.alg.frozen_updates,
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
@@ -88,15 +89,14 @@ class VirlRunner(OnPolicyRunner):
         self.wall_time = float(data["wall_time"])
         self.last_eval = dict(data.get("last_eval") or {})
         self.standing = dict(data.get("standing") or {})
+        self.alg.freeze_actor(int(data.get("frozen_updates", 0)))
         checkpoint.set_rng_state(data["rng"])
 
     # -- the loop -----------------------------------------------------------------------------
     def train(self, iterations: int, minutes: float = 0.0, save_every: int = 10, eval_every: int = 0,
               log: Callable[[str], None] = print) -> None:
         """Run until ``iterations`` in total are done or ``minutes`` of wall time have passed."""
-        from torch.utils.tensorboard import SummaryWriter
-
-        self.writer = SummaryWriter(str(self.run_dir / "tensorboard"))
+        self._open_writer()
         start_wall, start_it = time.time(), self.current_learning_iteration
         obs = self.env.get_observations().to(self.device)
         self.alg.train_mode()
@@ -128,6 +128,7 @@ class VirlRunner(OnPolicyRunner):
             raise
         finally:
             self.writer.close()
+            self.writer = None
         self.save_checkpoint()
 
     def _rollout(self, obs: TensorDict) -> TensorDict:
@@ -144,6 +145,14 @@ class VirlRunner(OnPolicyRunner):
         self.env_steps += self.cfg["num_steps_per_env"] * self.env.num_envs
         return obs
 
+    def _open_writer(self):
+        """The run's TensorBoard writer (opened on first use)."""
+        if self.writer is None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(str(self.run_dir / "tensorboard"))
+        return self.writer
+
     def run_evaluation(self) -> dict:
         """Ground-truth imitation score of the current deterministic policy (if an evaluator is set)."""
         if self.evaluate_fn is None:
@@ -158,8 +167,11 @@ class VirlRunner(OnPolicyRunner):
                           **{k: float(v) for k, v in result.items() if isinstance(v, (int, float))}}
         if self.standing.get("total"):
             self.last_eval["score_vs_standing"] = self.last_eval.get("total", float("nan")) / self.standing["total"]
+        with open(self.run_dir / "evaluations.jsonl", "a") as f:   # the learning curve, one line per evaluation
+            f.write(json.dumps({**self.last_eval, "env_steps": self.env_steps, "wall_time_s": self.wall_time}) + "\n")
+        writer = self._open_writer()
         for k, v in self.last_eval.items():
-            self.writer.add_scalar(f"eval/{k}", v, self.current_learning_iteration)
+            writer.add_scalar(f"eval/{k}", v, self.current_learning_iteration)
         return self.last_eval
 
     def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
