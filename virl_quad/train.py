@@ -256,6 +256,7 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
         student = distill_into(runner.alg.actor, robots.get(args.robot), demo, tg, args.hidden, args.seed,
                                args.warm_start_rounds, args.warm_start_steps, log)
         runner.wall_time += time.time() - t0
+        runner.alg.fix_actor_normalizer()
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
             f"{student['episodes']} episodes, mean travel {student['travel_m']:+.2f} m")
         if demo.motion is not None:

@@ -66,3 +66,21 @@ def test_overrides() -> None:
     for bad in ({"latency": (0.1, 0.0)}, {"latency": 3}, {"latency": (0, np.nan)}, {"nope": (0, 1)}):
         with pytest.raises(ValueError):
             DRConfig.from_overrides(bad)
+
+
+def test_each_robot_has_its_own_ranges() -> None:
+    """Pupper's observation latency is bounded by its HAL's period (0-20 ms), Laikago keeps
+    motion_imitation's 0-40 ms; the env draws from the robot's ranges."""
+    from virl_quad import envs
+
+    assert DRConfig.for_robot(SPEC).latency == (0.0, 0.02)
+    assert DRConfig.for_robot(robots.get("laikago")).latency == DRConfig().latency == (0.0, 0.04)
+    env = envs.make("pupper", randomize=True, render=False)
+    try:
+        draws = []
+        for seed in range(30):
+            env.reset(seed=seed)
+            draws.append(env.unwrapped.rand.latency)
+        assert max(draws) <= 0.02 and max(draws) > 0.01
+    finally:
+        env.close()

@@ -135,6 +135,11 @@ def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     (["--robot", "spot"], "unknown robot"),
     (["--demo", "/nonexistent/walk.mp4"], "walk.mp4"),
     (["--demo", "moonwalk"], "moonwalk"),
+    (["--init-std", "0"], "--init-std"),
+    (["--init-std", "nan"], "--init-std"),
+    (["--warm-start-rounds", "-1"], "--warm-start-rounds"),
+    (["--warm-start-steps", "0"], "--warm-start-steps"),
+    (["--critic-warmup", "-2"], "--critic-warmup"),
 ])
 def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
     p = run("virl_quad.train", *args, "--run-dir", str(tmp_path / "r"), *TINY, "--iterations", "1")

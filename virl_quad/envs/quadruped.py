@@ -129,7 +129,7 @@ class QuadrupedEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
         self.world = World(spec, ground=_ground(cfg))
-        self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig() if cfg.randomize else DRConfig.off())
+        self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig.for_robot(spec) if cfg.randomize else DRConfig.off())
         self.demo = cfg.demo
         if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
             raise ValueError(f"demonstration is at {self.demo.fps:.3f} fps but {spec.name} is controlled at "

@@ -42,6 +42,11 @@ class DRConfig:
     camera_yaw: Range = (-5.0, 5.0)            # deg
 
     @staticmethod
+    def for_robot(spec: RobotSpec) -> "DRConfig":
+        """The default ranges with the robot's own (``spec.randomization``) in place."""
+        return DRConfig.from_overrides(spec.randomization or None)
+
+    @staticmethod
     def off() -> "DRConfig":
         """The nominal robot: every range collapsed to its nominal value, no noise, no pushes."""
         return DRConfig(**NOMINAL)

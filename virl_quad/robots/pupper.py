@@ -48,5 +48,12 @@ SPEC = RobotSpec(
     camera_pitch=-15.0,                                 # deg
     strip_full_speed=0.5,                               # m/s, twice the built-in trot's speed
     leg=LEG,
+    randomization={
+        # s, observation delay: the HAL applies the command computed from a period's state in that
+        # period (it waits up to half a period for it) or in the next one, and damps after three
+        # without (deploy/PROTOCOL.md section 8): at most one control period, 20 ms. DRConfig's
+        # 0-40 ms is motion_imitation's Laikago figure at 30 Hz.
+        "latency": (0.0, 0.02),
+    },
     notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
 )

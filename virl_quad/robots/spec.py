@@ -120,6 +120,8 @@ class RobotSpec:
     strip_full_speed: float = 0.5   # m/s drawn as a half-width bar by the speed strip (sim.strip.stamp_speed)
     leg: LegGeometry | None = None  # leg chain for closed-form leg kinematics (m); None: not described
     notes: str = ""
+    randomization: dict = field(default_factory=dict)  # this robot's domain-randomisation ranges where they
+                                    # differ from DRConfig's defaults: {name: (lo, hi)}, units as DRConfig
     extra: dict = field(default_factory=dict)
 
     @property

@@ -70,13 +70,20 @@ class VirlPPO(PPO):
         self.frozen_updates -= 1
         params = list(self.actor.parameters())
         trainable = [p.requires_grad for p in params]
-        schedule, lr = self.schedule, self.learning_rate
+        schedule, lr, normalize = self.schedule, self.learning_rate, self.actor.obs_normalization
         for p in params:
             p.requires_grad_(False)      # no gradient: Adam leaves them (and their moments) alone
         self.schedule = "fixed"
+        self.actor.obs_normalization = False   # its input statistics stay too: the same function
         try:
             return super().update()
         finally:
             for p, t in zip(params, trainable):
                 p.requires_grad_(t)
-            self.schedule, self.learning_rate = schedule, lr
+            self.schedule, self.learning_rate, self.actor.obs_normalization = schedule, lr, normalize
+
+    def fix_actor_normalizer(self) -> None:
+        """Stop updating the actor's observation normaliser (its statistics stay as they are):
+        a warm-started actor was fitted with the statistics of its teacher's data, and running
+        statistics of PPO's rollouts would change what it computes."""
+        self.actor.obs_normalization = False

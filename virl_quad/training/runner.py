@@ -74,6 +74,7 @@ class VirlRunner(OnPolicyRunner):
                 "iteration": self.current_learning_iteration, "env_steps": self.env_steps,
                 "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
                 "standing": self.standing, "frozen_updates": self.alg.frozen_updates,
+                "actor_normalizer_fixed": not self.alg.actor.obs_normalization,
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
@@ -90,6 +91,8 @@ class VirlRunner(OnPolicyRunner):
         self.last_eval = dict(data.get("last_eval") or {})
         self.standing = dict(data.get("standing") or {})
         self.alg.freeze_actor(int(data.get("frozen_updates", 0)))
+        if data.get("actor_normalizer_fixed"):
+            self.alg.fix_actor_normalizer()
         checkpoint.set_rng_state(data["rng"])
 
     # -- the loop -----------------------------------------------------------------------------

@@ -31,7 +31,7 @@ class SimBackend(Backend):
     def __init__(self, spec: Any = "pupper", randomize: bool = False, seed: int = 0,
                  dr: Any | None = None) -> None:
         """``spec``: RobotSpec or robot name; ``randomize``: draw physics parameters with
-        ``seed`` from ``dr`` (a DRConfig; default ranges if None)."""
+        ``seed`` from ``dr`` (a DRConfig; the robot's default ranges if None)."""
         super().__init__(spec)
         from virl_quad.sim.world import World   # pybullet is imported only when a sim is made
 
@@ -40,7 +40,7 @@ class SimBackend(Backend):
         if randomize:
             from virl_quad.envs.randomize import DRConfig, sample
 
-            self.randomization = sample(dr or DRConfig(), np.random.default_rng(seed), self.spec)
+            self.randomization = sample(dr or DRConfig.for_robot(self.spec), np.random.default_rng(seed), self.spec)
             self.world.apply_params(self.randomization.physics)
         self.world.reset()
         self._accel_world = np.zeros(3)         # m/s², base acceleration over the last period

@@ -1,0 +1,73 @@
+"""VirlPPO's critic warm-up: while the actor is frozen an update moves the critic alone and
+leaves the learning rate where it was."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import torch
+from tensordict import TensorDict
+
+from virl_quad.training.algorithm import VirlPPO
+from virl_quad.training.config import TrainArgs, rsl_rl_config
+
+
+class _Env:
+    """The smallest VecEnv rsl-rl's PPO constructor reads (no simulation is stepped here)."""
+
+    num_envs, num_actions, device = 4, 3, "cpu"
+
+    def get_observations(self) -> TensorDict:
+        return TensorDict({"policy": torch.zeros(4, 5), "privileged": torch.zeros(4, 2)}, batch_size=[4])
+
+
+def _ppo() -> VirlPPO:
+    cfg = rsl_rl_config(TrainArgs(hidden="8"))
+    cfg["algorithm"]["class_name"] = VirlPPO
+    cfg["multi_gpu"] = None
+    env = _Env()
+    with contextlib.redirect_stdout(io.StringIO()):
+        alg = VirlPPO.construct_algorithm(env.get_observations(), env, cfg, "cpu")
+    return alg
+
+
+def _fill(alg: VirlPPO, steps: int = 8) -> None:
+    gen = torch.Generator().manual_seed(0)
+    alg.train_mode()
+    for _ in range(steps):
+        obs = TensorDict({"policy": torch.randn(4, 5, generator=gen), "privileged": torch.randn(4, 2, generator=gen)},
+                         batch_size=[4])
+        with torch.inference_mode():
+            alg.act(obs)
+            PPO_step = super(VirlPPO, alg).process_env_step
+            PPO_step(obs, torch.randn(4, generator=gen), torch.zeros(4), {"time_outs": torch.zeros(4)})
+    with torch.inference_mode():
+        super(VirlPPO, alg).compute_returns(obs)
+
+
+def test_frozen_update_moves_the_critic_alone_and_keeps_the_learning_rate():
+    alg = _ppo()
+    _fill(alg)
+    actor0 = {k: v.clone() for k, v in alg.actor.state_dict().items()}
+    critic0 = {k: v.clone() for k, v in alg.critic.state_dict().items()}
+    lr0 = alg.learning_rate
+    alg.freeze_actor(1)
+    alg.update()
+    assert all(torch.equal(actor0[k], v) for k, v in alg.actor.state_dict().items())
+    assert any(not torch.equal(critic0[k], v) for k, v in alg.critic.state_dict().items())
+    assert alg.learning_rate == lr0 and alg.schedule == "adaptive" and alg.frozen_updates == 0
+    assert all(p.requires_grad for p in alg.actor.mlp.parameters())
+    _fill(alg)
+    alg.update()                                   # unfrozen: the actor learns again
+    assert any(not torch.equal(actor0[k], v) for k, v in alg.actor.state_dict().items())
+
+
+def test_a_fixed_actor_normalizer_keeps_its_statistics():
+    alg = _ppo()
+    alg.fix_actor_normalizer()
+    _fill(alg)
+    mean = alg.actor.obs_normalizer._mean.clone()
+    alg.update()
+    assert torch.equal(alg.actor.obs_normalizer._mean, mean)
+    assert not torch.equal(alg.critic.obs_normalizer._mean, torch.zeros_like(alg.critic.obs_normalizer._mean))
