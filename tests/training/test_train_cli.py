@@ -18,7 +18,8 @@ from virl_quad.policy_io import load_policy
 from virl_quad.training import checkpoint
 
 TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--eval-episodes", "1",
-        "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1"]
+        "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1",
+        "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1"]
 
 
 def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:

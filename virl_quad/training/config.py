@@ -47,15 +47,15 @@ class TrainArgs:
     speed_shift_weight: float = 0.25   # with --speed-strip: sampling weight of negatives whose strip shows another speed (same legs), which teach the distance model to read the strip (1 made it score every agent behaviour ~0 in bench/reward_alignment.py)
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
-    learning_rate: float = 1e-3        # PPO Adam learning rate (adaptive on a KL target)
+    learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
     entropy_coef: float = 0.005        # PPO entropy bonus
-    init_std: float = 0.5              # initial action std (actions are in units of the robot's action scale)
+    init_std: float = 0.2              # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.1 rad per joint residual): small noise around a warm start that walks (motion_imitation fixes 0.125)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
     video: bool = True                 # write the final side-by-side video (demonstration | agent)
     warm_start_rounds: int = 4         # with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before PPO (0: start PPO from a fresh actor)
     warm_start_steps: int = 4000       # control steps gathered per warm-start round
     critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
-    tg: bool = False                   # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
+    tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
 
 
 def validate(args: TrainArgs) -> None:
