@@ -30,17 +30,26 @@ from virl_quad import envs, robots
 from virl_quad.demo.score import TERMS, record_episode, score_trajectory
 from virl_quad.demo.tracker import DEFAULT_LEAD, tracker_action
 from virl_quad.kinematics import Kinematics
+from virl_quad.policy.observation import policy_block
 
 
-def run(robot: str, demo, gain: float | None, lead: float, episodes: int, randomize: bool) -> dict[str, float]:
-    """Mean figures over seeded episodes; ``gain`` None: hold the default pose (action 0)."""
+def run(robot: str, demo, gain: float | None, lead: float, episodes: int, randomize: bool,
+        observed: bool = False) -> dict[str, float]:
+    """Mean figures over seeded episodes; ``gain`` None: hold the default pose (action 0).
+    ``observed``: the tracker feeds back the joint angles of the policy observation (delayed
+    and noisy, as a policy measures them) instead of the simulator's true ones."""
     spec = robots.get(robot)
     m, kin = demo.motion, Kinematics(spec)
     env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=10.0)
     out: dict[str, list[float]] = {k: [] for k in (*TERMS, "total", "survival", "travel", "ref_travel")}
+    c = env.unwrapped.contract
+    q_cols = policy_block("joint_pos_minus_default", c.with_phase, c.action_size)
 
     def policy(obs: dict) -> np.ndarray:
-        return np.zeros(len(spec.joint_names)) if gain is None else tracker_action(env, gain, lead)
+        if gain is None:
+            return np.zeros(c.action_size)
+        q = obs["policy"][q_cols] + spec.default_pose if observed else None
+        return tracker_action(env, gain, lead, q=q)
 
     try:
         for ep in range(episodes):
@@ -68,17 +77,19 @@ def main() -> None:
     p.add_argument("--gains", default="1,2,3", help="feedback gains g (comma-separated)")
     p.add_argument("--lead", type=float, default=DEFAULT_LEAD, help="s the feed-forward reference runs ahead")
     p.add_argument("--no-randomize", action="store_true", help="domain randomisation off")
+    p.add_argument("--observed", action="store_true", help="feed back the observed joint angles (delayed, "
+                   "noisy: what a policy measures) instead of the true ones")
     a = p.parse_args()
     d = demo_lib.load(a.demo, a.robot)
     rand = not a.no_randomize
     print(f"{a.robot}, demo {a.demo}: {a.episodes} episodes of 10 s, randomisation {'on' if rand else 'off'}, "
-          f"lead {a.lead:g} s")
+          f"lead {a.lead:g} s{', observed joint angles' if a.observed else ''}")
     print(f"{'controller':<22}" + "".join(f"{k[:9]:>10}" for k in (*TERMS, "total")) + f"{'survival':>10}{'speed':>8}")
     rows = [("default pose", None)] + [(f"tracker g={float(g):g}", float(g)) for g in a.gains.split(",")]
     base = None
     best = 0.0
     for name, g in rows:
-        r = run(a.robot, d, g, a.lead, a.episodes, rand)
+        r = run(a.robot, d, g, a.lead, a.episodes, rand, a.observed)
         base = r["total"] if g is None else base
         best = max(best, r["total"]) if g is not None else best
         print(f"{name:<22}" + "".join(f"{r[k]:10.3f}" for k in (*TERMS, "total"))
