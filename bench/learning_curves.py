@@ -22,7 +22,11 @@ import sys
 import tempfile
 from pathlib import Path
 
+import matplotlib
 import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
 SCRATCH = ["--no-tg", "--init-std", "0.5", "--learning-rate", "1e-3", "--warm-start-rounds", "0",
            "--critic-warmup", "0"]
@@ -68,11 +72,6 @@ def main() -> None:
     p.add_argument("--eval-every", type=int, default=20, help="iterations between evaluations")
     p.add_argument("--out", default="learning_curves.png", help="PNG to write")
     a = p.parse_args()
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     with tempfile.TemporaryDirectory() as tmp:
         runs = {name: train(Path(tmp) / name, a.robot, a.demo, a.reward, a.minutes, a.eval_every, extra)
                 for name, extra in (("scratch", SCRATCH), ("residual", []))}

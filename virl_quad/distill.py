@@ -70,7 +70,7 @@ class DistillArgs:
     blind_last_action: bool = True          # the student ignores the last-action input (no copying the teacher's last action)
     noise: float = 0.1                      # std of Gaussian noise on the executed action (action units): wider states, fewer falls
     randomize: bool = False                 # domain randomisation while gathering (off: the nominal robot, as the sim HAL)
-    max_latency: float = 0.04               # s, largest observation delay drawn with --randomize (training's 0.04)
+    max_latency: float | None = None        # s, largest observation delay drawn with --randomize (default: the robot's own range)
     seed: int = 0                           # random seed
     quiet: bool = False                     # no progress lines
 
@@ -176,7 +176,7 @@ def distil(args: DistillArgs, log=print, demo=None, env_options: dict | None = N
         raise UserError(f"demonstration {args.demo!r} has no reference motion: the tracker needs one")
     hidden = tuple(int(h) for h in args.hidden.split(","))
     rng, gen = np.random.default_rng(args.seed), torch.Generator().manual_seed(args.seed)
-    ranges = {"latency": (0.0, args.max_latency)} if args.randomize else None
+    ranges = {"latency": (0.0, args.max_latency)} if args.randomize and args.max_latency is not None else None
     pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, randomization=ranges, render=False, rsi=rsi,
                            episode_seconds=10.0, **(env_options or {})) for rsi in (False, True))
     contract = pair[0].unwrapped.contract
@@ -218,7 +218,7 @@ def main(args: DistillArgs) -> int:
     robots.get(args.robot)                        # unknown robot: one line, exit 2
     if args.rounds < 1 or args.steps < 1 or args.epochs < 1 or args.batch < 1:
         raise UserError("--rounds, --steps, --epochs and --batch must be >= 1")
-    if not 0.0 <= args.max_latency <= 0.2:
+    if args.max_latency is not None and not 0.0 <= args.max_latency <= 0.2:
         raise UserError(f"--max-latency must be between 0 and 0.2 s, got {args.max_latency}")
     out = Path(args.out or f"policies/{args.robot}_{Path(args.demo).stem}_tracker_bc.pt")
     log = (lambda *a: None) if args.quiet else (lambda m: print(m, flush=True))

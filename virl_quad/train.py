@@ -255,7 +255,7 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
     if tg is not None and args.warm_start_rounds > 0:
         t0 = time.time()
         student = distill_into(runner.alg.actor, robots.get(args.robot), demo, tg, args.hidden, args.seed,
-                               args.warm_start_rounds, args.warm_start_steps, log)
+                               args.warm_start_rounds, args.warm_start_steps, args.randomize, log)
         runner.wall_time += time.time() - t0
         runner.alg.fix_actor_normalizer()
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "

@@ -47,13 +47,16 @@ class TGMotion:
 
 
 def distill_into(actor: torch.nn.Module, spec: RobotSpec, demo, tg: TGParams, hidden: str, seed: int,
-                 rounds: int, steps: int, log: Callable[[str], None] = print) -> dict:
+                 rounds: int, steps: int, randomize: bool, log: Callable[[str], None] = print) -> dict:
     """DAgger-distil the tracker of ``tg`` into ``actor`` (an rsl-rl MLPModel of the run's
-    architecture, weights and observation normaliser replaced); returns the student's last
-    round statistics (episodes, falls, mean travel in m)."""
+    architecture, weights and observation normaliser replaced), gathering under the robot's
+    domain randomisation when ``randomize`` (the teacher feeds back the observed joint angles,
+    so its action stays a function of the observation); returns the student's last round
+    statistics (episodes, falls, mean travel in m)."""
     from virl_quad.distill import DistillArgs, distil
 
-    args = DistillArgs(robot=spec.name, rounds=rounds, steps=steps, hidden=hidden, seed=seed, quiet=True)
+    args = DistillArgs(robot=spec.name, rounds=rounds, steps=steps, hidden=hidden, seed=seed, quiet=True,
+                       randomize=randomize)
     student, info = distil(args, log=lambda line: log(f"warm start: {line}"), demo=demo,
                            env_options={"tg": tg}, motion=TGMotion(spec, tg))
     std = actor.distribution.std_param.detach().clone() if _has_std(actor) else None
