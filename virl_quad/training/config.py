@@ -49,7 +49,7 @@ class TrainArgs:
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
     entropy_coef: float = 0.005        # PPO entropy bonus
-    init_std: float = 0.2              # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.1 rad per joint residual): small noise around a warm start that walks (motion_imitation fixes 0.125)
+    init_std: float = 0.05             # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
     video: bool = True                 # write the final side-by-side video (demonstration | agent)
     warm_start_rounds: int = 4         # with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before PPO (0: start PPO from a fresh actor)
