@@ -64,7 +64,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     policy = load_policy(out)
     assert policy.spec.name == robot and policy.meta["iterations"] == 3
     action = policy.act(np.zeros(policy.meta["observation"]["size"], np.float32))
-    assert action.shape == (12,) and np.all(np.isfinite(action))
+    assert action.shape == (14,) and policy.action_size == 14 and np.all(np.isfinite(action))   # TG by default
     # a run whose demonstration was rendered otherwise (an older renderer) is not resumed
     import dataclasses
 
@@ -143,7 +143,7 @@ def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     (["--critic-warmup", "-2"], "--critic-warmup"),
 ])
 def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
-    p = run("virl_quad.train", *args, "--run-dir", str(tmp_path / "r"), *TINY, "--iterations", "1")
+    p = run("virl_quad.train", *TINY, "--iterations", "1", "--run-dir", str(tmp_path / "r"), *args)   # args last: they win
     assert p.returncode == 2
     assert message in p.stderr and "Traceback" not in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
