@@ -42,8 +42,7 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 #: Options added after runs were made, with the value that reproduces those runs on resume.
 LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0,
-                              "reward_warmup": 0, "tg": False,
-                              "warm_start_rounds": 0, "critic_warmup": 0}
+                              "reward_warmup": 0, "tg": False}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:

@@ -59,8 +59,7 @@ class VirlPPO(PPO):
     def freeze_actor(self, updates: int) -> None:
         """Fit the critic alone in the next ``updates`` calls of :meth:`update`, at a fixed
         learning rate: a warm-started actor is not moved by the advantages of an untrained
-        critic (they undo a warm start in a few iterations), and the KL-adaptive learning rate
-        does not climb while the actor's KL is held at zero."""
+        critic, and the KL-adaptive learning rate does not climb while the actor's KL is zero."""
         self.frozen_updates = int(updates)
 
     def update(self) -> dict[str, float]:

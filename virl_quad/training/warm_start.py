@@ -59,13 +59,8 @@ def distill_into(actor: torch.nn.Module, spec: RobotSpec, demo, tg: TGParams, hi
                        randomize=randomize)
     student, info = distil(args, log=lambda line: log(f"warm start: {line}"), demo=demo,
                            env_options={"tg": tg}, motion=TGMotion(spec, tg))
-    std = actor.distribution.std_param.detach().clone() if _has_std(actor) else None
+    std = actor.distribution.std_param.detach().clone()   # the run's exploration noise (scalar std type)
     actor.load_state_dict(student.state_dict())
-    if std is not None:                       # keep the run's exploration noise, not the student's
-        with torch.no_grad():
-            actor.distribution.std_param.copy_(std)
+    with torch.no_grad():
+        actor.distribution.std_param.copy_(std)
     return info["student"]
-
-
-def _has_std(actor: torch.nn.Module) -> bool:
-    return hasattr(getattr(actor, "distribution", None), "std_param")
