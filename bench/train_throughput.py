@@ -5,28 +5,36 @@
 Prints env steps/s of Algorithm 1 (rollout + distance-model updates + reward
 recomputation + PPO update), each phase's share of the iteration, and the
 ratio to the bare VecEnv throughput (same envs and workers, zero actions, no
-learning) measured in the same run.
+learning), for the physics of before the implicit PD (:data:`BEFORE`) and for
+today's defaults, in the same run, and the ratio of the two loops. The warm start
+(minutes before the first iteration) is left out.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 
+from virl_quad.envs import vec_env as vec_env_mod
 from virl_quad.envs.vec_env import QuadrupedVecEnv
 from virl_quad.train import build
 from virl_quad.training.config import TrainArgs
 
 
-def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int) -> float:
+#: the physics the training loop ran before the implicit PD (explicit torque PD; Pupper at 1 kHz)
+BEFORE = {"pupper": {"pd": "explicit", "sim_dt": 0.001, "substeps": 20}, "laikago": {"pd": "explicit"}}
+
+
+def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int, physics: dict) -> float:
     """Env steps/s of the VecEnv alone (zero actions), same configuration as training."""
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=workers, seed=1, demo=demo,
-                          randomize=args.randomize)
-    a = torch.zeros(args.num_envs, 12)
+                          randomize=args.randomize, **physics)
+    a = torch.zeros(args.num_envs, env.num_actions)
     env.step(a)
     t = time.perf_counter()
     for _ in range(steps):
@@ -36,48 +44,62 @@ def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int) -> float:
     return rate
 
 
+def measure(args: TrainArgs, iterations: int, physics: dict) -> tuple[float, float, dict[str, float]]:
+    """(training-loop env steps/s, bare VecEnv env steps/s, seconds per iteration of each phase)
+    with the envs built with the ``physics`` overrides (``{}``: the defaults)."""
+    vec_env_mod.QuadrupedVecEnv = functools.partial(QuadrupedVecEnv, **physics)   # what build() constructs
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            demo, env, runner = build(args, Path(tmp), None)
+    finally:
+        vec_env_mod.QuadrupedVecEnv = QuadrupedVecEnv
+    phases = {"rollout": 0.0, "distance-model updates": 0.0, "reward recompute": 0.0, "PPO update": 0.0}
+    obs = env.get_observations()
+    runner.alg.train_mode()
+    runner._rollout(obs)  # warm-up iteration (not timed)
+    with torch.inference_mode():
+        runner.alg.compute_returns(env.get_observations())
+    runner.alg.update()
+    t_all = time.perf_counter()
+    for _ in range(iterations):
+        t0 = time.perf_counter()
+        obs = runner._rollout(env.get_observations())
+        t1 = time.perf_counter()
+        with torch.inference_mode():
+            runner.alg.compute_returns(obs)
+        t2 = time.perf_counter()
+        runner.alg.update()
+        t3 = time.perf_counter()
+        upd = runner.alg.last_reward_info.get("time/distance_update_s", 0.0)
+        phases["rollout"] += t1 - t0
+        phases["distance-model updates"] += upd
+        phases["reward recompute"] += (t2 - t1) - upd
+        phases["PPO update"] += t3 - t2
+    total = time.perf_counter() - t_all
+    env.close()
+    rate = iterations * args.num_envs * args.steps_per_env / total
+    bare = bare_vec_env_rate(args, demo, args.num_workers, args.steps_per_env * 2, physics)
+    return rate, bare, {k: v / iterations for k, v in phases.items()}
+
+
 def main(robot: str, reward: str, iterations: int, num_envs: int, steps_per_env: int, workers: int) -> None:
-    """Measure and print."""
+    """Measure the loop with the physics of before and with today's defaults, in one run; print."""
     torch.set_num_threads(1)
     args = TrainArgs(robot=robot, reward=reward, num_envs=num_envs, steps_per_env=steps_per_env,
-                     num_workers=workers)
-    with tempfile.TemporaryDirectory() as tmp:
-        demo, env, runner = build(args, Path(tmp), None)
-        phases = {"rollout": 0.0, "distance-model updates": 0.0, "reward recompute": 0.0, "PPO update": 0.0}
-        obs = env.get_observations()
-        runner.alg.train_mode()
-        runner._rollout(obs)  # warm-up iteration (not timed)
-        with torch.inference_mode():
-            runner.alg.compute_returns(env.get_observations())
-        runner.alg.update()
-        t_all = time.perf_counter()
-        for _ in range(iterations):
-            t0 = time.perf_counter()
-            obs = runner._rollout(env.get_observations())
-            t1 = time.perf_counter()
-            with torch.inference_mode():
-                runner.alg.compute_returns(obs)
-            t2 = time.perf_counter()
-            runner.alg.update()
-            t3 = time.perf_counter()
-            info = runner.alg.last_reward_info
-            upd = info.get("time/distance_update_s", 0.0)
-            phases["rollout"] += t1 - t0
-            phases["distance-model updates"] += upd
-            phases["reward recompute"] += (t2 - t1) - upd
-            phases["PPO update"] += t3 - t2
-        total = time.perf_counter() - t_all
-        env.close()
-        steps = iterations * num_envs * steps_per_env
-        train_rate = steps / total
-        bare = bare_vec_env_rate(args, demo, workers, steps_per_env * 2)
+                     num_workers=workers, warm_start_rounds=0)
     print(f"{robot}, reward {reward}: {num_envs} envs x {steps_per_env} steps, {workers} worker(s), "
-          f"{iterations} iterations")
-    print(f"  training loop       : {train_rate:8.1f} env steps/s")
-    print(f"  bare VecEnv         : {bare:8.1f} env steps/s")
-    print(f"  ratio loop / bare   : {train_rate / bare:8.2f}")
-    for name, sec in phases.items():
-        print(f"  {name:22s}: {sec / iterations:6.2f} s/iteration  {100 * sec / total:5.1f} %")
+          f"{iterations} iterations per configuration")
+    rates = {}
+    for name, physics in (("before", BEFORE.get(robot, {})), ("now", {})):
+        rate, bare, phases = measure(args, iterations, physics)
+        rates[name] = rate
+        print(f"{name} ({physics or 'defaults'}):")
+        print(f"  training loop       : {rate:8.1f} env steps/s")
+        print(f"  bare VecEnv         : {bare:8.1f} env steps/s   (loop / bare {rate / bare:.2f})")
+        total = sum(phases.values())
+        for phase, sec in phases.items():
+            print(f"  {phase:22s}: {sec:6.2f} s/iteration  {100 * sec / total:5.1f} %")
+    print(f"training loop now / before: {rates['now'] / rates['before']:.2f}")
 
 
 if __name__ == "__main__":

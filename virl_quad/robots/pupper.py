@@ -34,8 +34,9 @@ SPEC = RobotSpec(
     joint_friction=0.021,                               # N·m
     total_mass=2.135,                                   # kg: 0.991 + 4 x (0.106 + 0.142 + 0.038)
     spawn_height=0.17,                                  # m, feet touch the ground in the default pose
-    sim_dt=0.001,                                       # s (explicit PD on a 38 g shank needs 1 kHz)
-    substeps=20,                                        # -> 50 Hz policy
+    sim_dt=0.002,                                       # s (the implicit PD, virl_quad/sim/pd.py; the explicit
+                                                        # one on a 38 g shank needs 0.001)
+    substeps=10,                                        # -> 50 Hz policy
     action_scale=0.5,                                   # rad per unit action: +-1.0 rad at the env's clip of 2,
                                                         # to reach the built-in gaits' joint range (knee down to
                                                         # -0.73 rad from the default pose) and to overshoot the weak PD
@@ -55,5 +56,5 @@ SPEC = RobotSpec(
         # 0-40 ms is motion_imitation's Laikago figure at 30 Hz.
         "latency": (0.0, 0.02),
     },
-    notes="Own URDF generated from public figures; explicit torque PD at 1 kHz, policy at 50 Hz.",
+    notes="Own URDF generated from public figures; implicit PD at 500 Hz, policy at 50 Hz.",
 )

@@ -25,7 +25,7 @@ from virl_quad.quiet import quiet_fd
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.sim import camera
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS, PhysicsParams
-from virl_quad.sim.pd import pd_torque
+from virl_quad.sim.pd import PD_MODES, pd_motor, pd_torque
 
 GRAVITY = 9.81  # m/s²
 _PARK = (0.0, 0.0, -50.0)  # m, where a body not being rendered waits
@@ -45,7 +45,7 @@ class RobotState:
     rpy: np.ndarray                # rad, roll pitch yaw (3)
     q: np.ndarray                  # rad (12)
     dq: np.ndarray                 # rad/s (12)
-    tau: np.ndarray                # N·m, last applied (12)
+    tau: np.ndarray                # N·m, the PD law's torque in the last physics step, clipped (12)
     foot_contact: np.ndarray       # bool (4), FR FL RR RL
     fall_contact: bool             # a body/thigh link touches the ground
 
@@ -72,10 +72,15 @@ def _ground_texture(ground: str) -> str:
 
 
 class World:
-    """One robot (plus an optional ghost) on a ground plane (``ground``: one of :data:`GROUNDS`)."""
+    """One robot (plus an optional ghost) on a ground plane (``ground``: one of :data:`GROUNDS`);
+    ``pd``: how the joint PD is stepped, one of :data:`~virl_quad.sim.pd.PD_MODES`."""
 
-    def __init__(self, spec: RobotSpec, *, ghost: bool = False, ground: str = DEFAULT_GROUND) -> None:
+    def __init__(self, spec: RobotSpec, *, ghost: bool = False, ground: str = DEFAULT_GROUND,
+                 pd: str = "implicit") -> None:
+        if pd not in PD_MODES:
+            raise ValueError(f"unknown PD mode {pd!r}; choose one of: {', '.join(PD_MODES)}")
         self.spec = spec
+        self.pd = pd
         with quiet_fd(1):  # PyBullet prints 'argv[0]=' from C when it connects
             self.bc = BulletClient(connection_mode=pybullet.DIRECT)
         self.client = self.bc._client
@@ -134,10 +139,12 @@ class World:
             inertia = self.nominal_inertia[link] * scale * params.inertia_scale
             bc.changeDynamics(self.robot, link, mass=mass, localInertiaDiagonal=inertia.tolist())
         friction = s.joint_friction if params.joint_friction is None else params.joint_friction
+        self.friction = float(friction)   # N·m
         damping = s.joint_damping if params.joint_damping is None else params.joint_damping
         for j in self.joint_ids:
             bc.changeDynamics(self.robot, j, jointDamping=damping, linearDamping=0.0, angularDamping=0.0)
-        # Coulomb joint friction: a velocity motor aiming at zero speed with the friction as its force.
+        # Coulomb joint friction: a velocity motor aiming at zero speed with the friction as its force
+        # (the explicit PD's; the implicit PD folds the friction into its own motor command).
         bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.VELOCITY_CONTROL,
                                      targetVelocities=[0.0] * 12, forces=[friction] * 12)
         bc.changeDynamics(self.ground, -1, lateralFriction=params.ground_friction,
@@ -210,9 +217,15 @@ class World:
         kd = self.kd if kd is None else np.asarray(kd, dtype=np.float64)
         for _ in range(self.spec.substeps):
             q, dq = self.joint_states()
-            self.tau = pd_torque(q_target, q, dq, kp, kd, self.torque_limit, tau_ff)
-            bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.TORQUE_CONTROL,
-                                         forces=self.tau.tolist())
+            if self.pd == "implicit":
+                velocity, force, self.tau = pd_motor(q_target, q, dq, kp, kd, self.torque_limit, self.friction,
+                                                     tau_ff)
+                bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.VELOCITY_CONTROL,
+                                             targetVelocities=velocity.tolist(), forces=force.tolist())
+            else:
+                self.tau = pd_torque(q_target, q, dq, kp, kd, self.torque_limit, tau_ff)
+                bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.TORQUE_CONTROL,
+                                             forces=self.tau.tolist())
             bc.stepSimulation()
         self.time += self.spec.control_dt
 

@@ -55,6 +55,7 @@ class TrainArgs:
     warm_start_rounds: int = 4         # with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before PPO (0: start PPO from a fresh actor)
     warm_start_steps: int = 4000       # control steps gathered per warm-start round
     critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
+    symmetry: bool = False             # rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg: the mirror shifts the gait clock by the TG's leg offsets)
     tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
 
 
@@ -89,6 +90,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.adversarial_weight}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
         raise ValueError("--minutes must be >= 0 and episode/eval seconds > 0")
+    if args.symmetry and not args.tg:
+        raise ValueError("--symmetry needs --tg (the mirror shifts the gait clock by the TG's leg offsets)")
     hidden_sizes(args)
 
 
@@ -122,6 +125,9 @@ def rsl_rl_config(args: TrainArgs) -> dict:
             "gamma": 0.99, "lam": 0.95, "value_loss_coef": 1.0, "entropy_coef": args.entropy_coef,
             "learning_rate": args.learning_rate, "max_grad_norm": 1.0, "schedule": "adaptive",
             "desired_kl": 0.01, "use_clipped_value_loss": True,
+            "symmetry_cfg": {"use_data_augmentation": True,
+                             "data_augmentation_func": "virl_quad.training.symmetry:augment"}
+            if args.symmetry else None,
         },
     }
 
