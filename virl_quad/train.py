@@ -251,6 +251,12 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
     from virl_quad.training.warm_start import distill_into
 
     tg = runner.env.contract.tg
+    if tg is not None and demo.motion is not None:
+        from virl_quad.training.runner import eval_summary
+
+        prior = _evaluate(args, demo, lambda obs: np.zeros(14), runner.env.contract.env_overrides())
+        log(f"the gait prior alone (zero residual, no modulation): "
+            f"{eval_summary(prior, runner.standing).rsplit(' @', 1)[0]}")
     if tg is not None and args.warm_start_rounds > 0:
         t0 = time.time()
         student = distill_into(runner.alg.actor, robots.get(args.robot), demo, tg, args.hidden, args.seed,
