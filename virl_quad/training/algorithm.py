@@ -20,11 +20,35 @@ from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
 
 
-class VirlPPO(PPO):
-    """PPO whose rewards come from a :class:`~virl_quad.training.rewards.RolloutReward`."""
+class _ActorRate:
+    """Adam over actor and critic as rsl-rl's KL-adaptive schedule sees it: ``param_groups``
+    lists the actor's group alone, so the schedule sets the actor's learning rate and the
+    critic keeps its own; everything else is the optimizer's."""
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, optimizer: torch.optim.Optimizer) -> None:
+        self.optimizer = optimizer
+
+    @property
+    def param_groups(self) -> list[dict]:
+        """The actor's parameter group."""
+        return self.optimizer.param_groups[:1]
+
+    def __getattr__(self, name: str):
+        return getattr(self.optimizer, name)
+
+
+class VirlPPO(PPO):
+    """PPO whose rewards come from a :class:`~virl_quad.training.rewards.RolloutReward`.
+
+    ``critic_learning_rate``: a fixed Adam rate of the critic (None: the critic shares the
+    actor's KL-adaptive rate, as in rsl-rl)."""
+
+    def __init__(self, *args, critic_learning_rate: float | None = None, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        if critic_learning_rate:
+            self.optimizer = _ActorRate(torch.optim.Adam([
+                {"params": list(self.actor.parameters()), "lr": self.learning_rate},
+                {"params": list(self.critic.parameters()), "lr": float(critic_learning_rate)}]))
         self.reward_source = None  # attached by the runner: needs the demonstration
         self._time_outs: list[torch.Tensor] = []
         self.last_reward_info: dict[str, float] = {}

@@ -48,6 +48,7 @@ class TrainArgs:
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
+    critic_learning_rate: float = 0.0  # fixed Adam learning rate of the critic (0: the critic shares the actor's KL-adaptive rate)
     entropy_coef: float = 0.005        # PPO entropy bonus
     init_std: float = 0.05             # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
@@ -69,6 +70,8 @@ def validate(args: TrainArgs) -> None:
     for name in ("warm_start_rounds", "critic_warmup"):
         if getattr(args, name) < 0:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
+    if not 0 <= args.critic_learning_rate <= 1:
+        raise ValueError(f"--critic-learning-rate must lie in [0, 1], got {args.critic_learning_rate}")
     if not 0 < args.init_std <= 2:
         raise ValueError(f"--init-std must lie in (0, 2] action units, got {args.init_std}")
     for name in ("num_envs", "iterations", "steps_per_env", "save_every", "warm_start_steps"):
@@ -125,6 +128,7 @@ def rsl_rl_config(args: TrainArgs) -> dict:
             "gamma": 0.99, "lam": 0.95, "value_loss_coef": 1.0, "entropy_coef": args.entropy_coef,
             "learning_rate": args.learning_rate, "max_grad_norm": 1.0, "schedule": "adaptive",
             "desired_kl": 0.01, "use_clipped_value_loss": True,
+            "critic_learning_rate": args.critic_learning_rate or None,
             "symmetry_cfg": {"use_data_augmentation": True,
                              "data_augmentation_func": "virl_quad.training.symmetry:augment"}
             if args.symmetry else None,
