@@ -53,6 +53,10 @@ SPEC = RobotSpec(
     spawn_height=0.486,                                 # m, toes touch the ground in the default pose
     sim_dt=0.002,                                       # s
     substeps=15,                                        # -> 33.3 Hz policy (motion_imitation: ~30 Hz)
+    tracker_gain=0.0,                                   # its 220 N·m/rad PD follows the gait prior open-loop;
+                                                        # feedback on top of it topples the robot under latency,
+    tracker_lead=0.04,                                  # s
+    tracker_noise=0.0,                                  # and so does 0.1 action units (6.6 N·m) of noise
     action_scale=0.3,                                   # rad per unit action
     max_roll=0.6,                                       # rad
     max_pitch=0.6,                                      # rad

@@ -117,6 +117,11 @@ class RobotSpec:
     camera_yaw: float               # deg, 0 = side view from the robot's right, +x to the right of the image
     camera_pitch: float             # deg, negative looks down
     episode_seconds: float = 10.0   # s, time limit of one training episode
+    tracker_gain: float = 2.0       # the warm start's tracker of the gait prior (virl_quad.training.warm_start):
+                                    # feedback gain on the joint error (a weak PD needs it to follow a gait; a
+                                    # stiff one follows open-loop and is destabilised by it under latency),
+    tracker_lead: float = 0.08      # s its feed-forward runs ahead of the clock,
+    tracker_noise: float = 0.1      # action units, std of the noise on its executed actions while gathering
     strip_full_speed: float = 0.5   # m/s drawn as a half-width bar by the speed strip (sim.strip.stamp_speed)
     leg: LegGeometry | None = None  # leg chain for closed-form leg kinematics (m); None: not described
     notes: str = ""

@@ -6,7 +6,9 @@ measured joint error on top of the TG's next pose,
 
     target = q_tg(phase + lead) + gain * (q_tg(phase) - q)          (rad)
 
-follows it (``virl_quad.demo.tracker``). It needs nothing but the TG and the robot's own joint
+(``gain``, ``lead`` and the gathering noise: the robot's ``tracker_*``; Laikago's stiff PD
+needs no feedback) follows it
+(``virl_quad.demo.tracker``). It needs nothing but the TG and the robot's own joint
 angles, which the policy observes (the TG phase too), so it is a function of the observation
 and a proprioceptive policy can represent it: ``virl_quad.distill``'s DAgger copies it into
 the actor (the training architecture and observation) in a few minutes. PPO then starts from
@@ -56,7 +58,8 @@ def distill_into(actor: torch.nn.Module, spec: RobotSpec, demo, tg: TGParams, hi
     from virl_quad.distill import DistillArgs, distil
 
     args = DistillArgs(robot=spec.name, rounds=rounds, steps=steps, hidden=hidden, seed=seed, quiet=True,
-                       randomize=randomize)
+                       randomize=randomize, gain=spec.tracker_gain, lead=spec.tracker_lead,
+                       noise=spec.tracker_noise)
     student, info = distil(args, log=lambda line: log(f"warm start: {line}"), demo=demo,
                            env_options={"tg": tg}, motion=TGMotion(spec, tg))
     std = actor.distribution.std_param.detach().clone()   # the run's exploration noise (scalar std type)
