@@ -48,7 +48,7 @@ class TrainArgs:
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
-    critic_learning_rate: float = 0.0  # fixed Adam learning rate of the critic (0: the critic shares the actor's KL-adaptive rate)
+    critic_learning_rate: float = 1e-3  # fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl
     entropy_coef: float = 0.005        # PPO entropy bonus
     init_std: float = 0.05             # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)
     hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
