@@ -201,6 +201,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
                         evaluate=lambda policy: _evaluate(args, demo, policy, actions),
                         device=args.device)
+    if not args.device.startswith("cuda"):
+        runner.alg.learn_threads = os.cpu_count() or 1   # every core while the env workers wait
     return demo, env, runner
 
 

@@ -168,7 +168,7 @@ def ground_shifted(demo: Demonstration, robot: str, n: int, ground: str = DEFAUL
     one the demonstration was rendered on. Empty on the plain ground (no pattern: the re-renders
     would equal the demonstration), without a motion, or when a re-render comes out at another
     length."""
-    from virl_quad.sim.world import CHECKER_SQUARE
+    from virl_quad.sim.ground import CHECKER_SQUARE
 
     if n <= 0 or demo.motion is None or ground != "checker":
         return []

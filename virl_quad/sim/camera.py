@@ -3,7 +3,9 @@
 The camera keeps a fixed world yaw (it does not turn with the robot, so a turn
 is visible) and renders with PyBullet's CPU TinyRenderer, which works headless.
 Frames are 48x48 grayscale uint8, the VIRL observation; a larger RGB preview
-is available for videos.
+is available for videos. Given a ``ground``, the ground plane is drawn in numpy behind
+TinyRenderer's render of the robot (:mod:`virl_quad.sim.ground`), several times cheaper than
+TinyRenderer's own.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from virl_quad.quiet import import_pybullet_quietly
+from virl_quad.sim import ground as ground_mod
 
 import_pybullet_quietly()   # first: its build-time banner would break the CLIs' one-line errors
 import pybullet  # noqa: E402
@@ -49,16 +52,21 @@ def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
 
 
 def render(client: int, target: np.ndarray, cam: CameraParams, size: int = FRAME_SIZE,
-           rgb: bool = False) -> np.ndarray:
-    """Render the scene looking at ``target`` (m, world). Gray (size, size) uint8, or RGB (size, size, 3)."""
+           rgb: bool = False, ground: str | None = None) -> np.ndarray:
+    """Render the scene looking at ``target`` (m, world). Gray (size, size) uint8, or RGB (size, size, 3).
+    ``ground``: draw this ground (one of :data:`~virl_quad.sim.params.GROUNDS`) behind the scene in
+    numpy, for a world whose ground plane TinyRenderer does not draw; None: the scene alone."""
     view = pybullet.computeViewMatrixFromYawPitchRoll(
         cameraTargetPosition=[float(target[0]), float(target[1]), float(target[2]) + cam.height],
         distance=cam.distance, yaw=cam.yaw, pitch=cam.pitch, roll=0.0, upAxisIndex=2,
         physicsClientId=client)
-    proj = pybullet.computeProjectionMatrixFOV(fov=cam.fov, aspect=1.0, nearVal=0.02, farVal=20.0,
-                                               physicsClientId=client)
-    _, _, px, _, _ = pybullet.getCameraImage(
+    proj = pybullet.computeProjectionMatrixFOV(fov=cam.fov, aspect=1.0, nearVal=ground_mod.NEAR,
+                                               farVal=ground_mod.FAR, physicsClientId=client)
+    _, _, px, depth, _ = pybullet.getCameraImage(
         size, size, viewMatrix=view, projectionMatrix=proj, renderer=pybullet.ER_TINY_RENDERER,
         shadow=0, flags=pybullet.ER_NO_SEGMENTATION_MASK, physicsClientId=client)
-    img = np.asarray(px, dtype=np.uint8).reshape(size, size, 4)
-    return img[..., :3].copy() if rgb else rgb_to_gray(img)
+    img = np.asarray(px, dtype=np.uint8).reshape(size, size, 4)[..., :3]
+    img = img.copy() if rgb else rgb_to_gray(img)
+    if ground is not None:
+        img = ground_mod.composite(img, np.asarray(depth).reshape(size, size), view, proj, ground)
+    return img

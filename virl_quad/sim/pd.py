@@ -56,9 +56,9 @@ def pd_motor(
     The target is where ``kp (q_target - q) + tau_ff - kd v`` equals the friction (zero
     inside the friction band: the joint sticks); the force bound is the PD torque's
     magnitude plus the friction, so a joint held against a load or at rest can use both."""
-    drive = kp * (q_target - q) + np.asarray(tau_ff, dtype=np.float64)      # N·m, the PD torque at rest
-    tau = np.clip(drive - kd * dq, -torque_limit, torque_limit)
+    drive = kp * (q_target - q) + tau_ff                     # N·m, the PD torque at rest
+    tau = np.minimum(np.maximum(drive - kd * dq, -torque_limit), torque_limit)
     kd_safe = np.maximum(kd, 1e-9)
-    v_star = np.clip(drive / kd_safe, -_MAX_TARGET_VELOCITY, _MAX_TARGET_VELOCITY)
-    target = np.sign(v_star) * np.maximum(np.abs(v_star) - friction / kd_safe, 0.0)
+    v_star = np.minimum(np.maximum(drive / kd_safe, -_MAX_TARGET_VELOCITY), _MAX_TARGET_VELOCITY)
+    target = np.copysign(np.maximum(np.abs(v_star) - friction / kd_safe, 0.0), v_star)
     return target, np.abs(tau) + friction, tau

@@ -7,11 +7,7 @@ reads state and renders. Arrays use the canonical joint order of the spec.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
-
 import numpy as np
 
 from virl_quad.quiet import import_pybullet_quietly
@@ -24,11 +20,13 @@ from pybullet_utils.bullet_client import BulletClient
 from virl_quad.quiet import quiet_fd
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.sim import camera
-from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS, PhysicsParams
+from virl_quad.sim import ground as ground_mod
+from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
 from virl_quad.sim.pd import PD_MODES, pd_motor, pd_torque
 
 GRAVITY = 9.81  # m/s²
 _PARK = (0.0, 0.0, -50.0)  # m, where a body not being rendered waits
+GROUND_RENDERERS = ("numpy", "tiny")
 
 
 @dataclass
@@ -50,35 +48,21 @@ class RobotState:
     fall_contact: bool             # a body/thigh link touches the ground
 
 
-CHECKER_SQUARE = 0.125  # m: side of a square of the "checker" ground (16 per 2 m texture tile)
-
-
-def _ground_texture(ground: str) -> str:
-    """Path of the ground texture image (made once, cached in the temp folder)."""
-    if ground not in GROUNDS:
-        raise ValueError(f"unknown ground {ground!r}; choose one of: {', '.join(GROUNDS)}")
-    path = Path(tempfile.gettempdir()) / f"virl_quad_ground_{ground}_v1.png"
-    if not path.exists():
-        import cv2
-
-        n, px = 16, 16  # squares per texture tile (one tile = 2 m on plane100), pixels per square
-        idx = (np.arange(n * px) // px)
-        board = ((idx[:, None] + idx[None, :]) % 2).astype(np.uint8)
-        img = np.where(board == 1, 150, 95) if ground == "checker" else np.full_like(board, 120)
-        tmp = path.with_suffix(f".{os.getpid()}.png")
-        cv2.imwrite(str(tmp), img.astype(np.uint8))
-        os.replace(tmp, path)
-    return str(path)
-
-
 class World:
-    """One robot (plus an optional ghost) on a ground plane (``ground``: one of :data:`GROUNDS`);
-    ``pd``: how the joint PD is stepped, one of :data:`~virl_quad.sim.pd.PD_MODES`."""
+    """One robot (plus an optional ghost) on a ground plane (``ground``: one of
+    :data:`~virl_quad.sim.params.GROUNDS`); ``pd``: how the joint PD is stepped, one of
+    :data:`~virl_quad.sim.pd.PD_MODES`; ``ground_renderer``: who draws the ground in renders,
+    ``"numpy"`` (the default, :mod:`virl_quad.sim.ground`) or ``"tiny"`` (TinyRenderer, the
+    reference: the same picture, several times slower)."""
 
     def __init__(self, spec: RobotSpec, *, ghost: bool = False, ground: str = DEFAULT_GROUND,
-                 pd: str = "implicit") -> None:
+                 pd: str = "implicit", ground_renderer: str = "numpy") -> None:
         if pd not in PD_MODES:
             raise ValueError(f"unknown PD mode {pd!r}; choose one of: {', '.join(PD_MODES)}")
+        if ground_renderer not in GROUND_RENDERERS:
+            raise ValueError(f"unknown ground renderer {ground_renderer!r}; choose one of: "
+                             f"{', '.join(GROUND_RENDERERS)}")
+        ground_mod.check_ground(ground)
         self.spec = spec
         self.pd = pd
         with quiet_fd(1):  # PyBullet prints 'argv[0]=' from C when it connects
@@ -90,8 +74,12 @@ class World:
         bc.setPhysicsEngineParameter(fixedTimeStep=spec.sim_dt, numSolverIterations=10,
                                    deterministicOverlappingPairs=1)
         self.ground = bc.loadURDF("plane100.urdf", useMaximalCoordinates=True)
-        bc.changeVisualShape(self.ground, -1, textureUniqueId=bc.loadTexture(_ground_texture(ground)),
-                             rgbaColor=[1, 1, 1, 1])
+        if ground_renderer == "tiny":
+            bc.changeVisualShape(self.ground, -1, textureUniqueId=bc.loadTexture(ground_mod.texture_path(ground)),
+                                 rgbaColor=[1, 1, 1, 1])
+        else:   # invisible to TinyRenderer; camera.render draws it
+            bc.changeVisualShape(self.ground, -1, rgbaColor=[1, 1, 1, 0])
+        self._drawn_ground = ground if ground_renderer == "numpy" else None
         self.robot = self._load_robot()
         self.ghost = self._load_robot(ghost=True) if ghost else None
         info = [bc.getJointInfo(self.robot, j) for j in range(bc.getNumJoints(self.robot))]
@@ -202,7 +190,7 @@ class World:
 
     def joint_states(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint positions (rad) and velocities (rad/s) of the agent."""
-        js = self.bc.getJointStates(self.robot, self.joint_ids)
+        js = pybullet.getJointStates(self.robot, self.joint_ids, physicsClientId=self.client)
         return np.array([j[0] for j in js]), np.array([j[1] for j in js])
 
     def step(self, q_target: np.ndarray, tau_ff: np.ndarray | float = 0.0, kp: np.ndarray | None = None,
@@ -212,21 +200,25 @@ class World:
         ``kp``/``kd`` (N·m/rad, N·m·s/rad) override the spec's gains (a HAL command's gains);
         ``None`` keeps the spec's, scaled by the domain randomisation.
         """
-        bc = self.bc
+        # pybullet's functions called directly, not through BulletClient: its per-call wrapping
+        # costs about as much as the PD law in this loop.
+        c, robot, joints = self.client, self.robot, self.joint_ids
         kp = self.kp if kp is None else np.asarray(kp, dtype=np.float64)
         kd = self.kd if kd is None else np.asarray(kd, dtype=np.float64)
+        tau_ff = np.asarray(tau_ff, dtype=np.float64)
         for _ in range(self.spec.substeps):
             q, dq = self.joint_states()
             if self.pd == "implicit":
                 velocity, force, self.tau = pd_motor(q_target, q, dq, kp, kd, self.torque_limit, self.friction,
                                                      tau_ff)
-                bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.VELOCITY_CONTROL,
-                                             targetVelocities=velocity.tolist(), forces=force.tolist())
+                pybullet.setJointMotorControlArray(robot, joints, pybullet.VELOCITY_CONTROL,
+                                                   targetVelocities=velocity.tolist(), forces=force.tolist(),
+                                                   physicsClientId=c)
             else:
                 self.tau = pd_torque(q_target, q, dq, kp, kd, self.torque_limit, tau_ff)
-                bc.setJointMotorControlArray(self.robot, self.joint_ids, pybullet.TORQUE_CONTROL,
-                                             forces=self.tau.tolist())
-            bc.stepSimulation()
+                pybullet.setJointMotorControlArray(robot, joints, pybullet.TORQUE_CONTROL,
+                                                   forces=self.tau.tolist(), physicsClientId=c)
+            pybullet.stepSimulation(physicsClientId=c)
         self.time += self.spec.control_dt
 
     def push(self, delta_lin_vel: np.ndarray) -> None:
@@ -287,7 +279,7 @@ class World:
             self.bc.resetBasePositionAndOrientation(other, _PARK, [0, 0, 0, 1])
         try:
             pos = self.bc.getBasePositionAndOrientation(target)[0]
-            return camera.render(self.client, np.array(pos), cam, size, rgb)
+            return camera.render(self.client, np.array(pos), cam, size, rgb, ground=self._drawn_ground)
         finally:
             if parked is not None:
                 self.bc.resetBasePositionAndOrientation(other, parked[0], parked[1])

@@ -15,6 +15,9 @@ rollout loop calls ``act`` / ``process_env_step`` / ``compute_returns`` /
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import torch
 from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
@@ -53,6 +56,19 @@ class VirlPPO(PPO):
         self._time_outs: list[torch.Tensor] = []
         self.last_reward_info: dict[str, float] = {}
         self.frozen_updates = 0    # coming updates that fit the critic alone (see freeze_actor)
+        #: torch's CPU threads while the distance model and PPO learn (the env workers wait
+        #: then, their cores free); None: torch's setting stays as it is
+        self.learn_threads: int | None = None
+
+    @contextlib.contextmanager
+    def _learning_threads(self) -> Iterator[None]:
+        before = torch.get_num_threads()
+        if self.learn_threads:
+            torch.set_num_threads(self.learn_threads)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(before)
 
     def attach_reward(self, source) -> None:
         """Set the reward source (see virl_quad.training.rewards)."""
@@ -70,7 +86,7 @@ class VirlPPO(PPO):
     def compute_returns(self, obs: TensorDict) -> None:
         """Update the distance model, recompute this rollout's rewards, then GAE as usual."""
         st = self.storage
-        with torch.inference_mode(False), torch.enable_grad():
+        with self._learning_threads(), torch.inference_mode(False), torch.enable_grad():
             new_rewards, info = self.reward_source.finish()
         new_rewards = new_rewards.to(self.device, torch.float32).reshape(st.rewards.shape)
         time_outs = torch.stack(self._time_outs).reshape(st.rewards.shape)
@@ -78,7 +94,8 @@ class VirlPPO(PPO):
         st.rewards.copy_(new_rewards + self.gamma * st.values * time_outs)
         info["reward_mean"] = float(new_rewards.mean())
         self.last_reward_info = info
-        super().compute_returns(obs)
+        with self._learning_threads():
+            super().compute_returns(obs)
 
     def freeze_actor(self, updates: int) -> None:
         """Fit the critic alone in the next ``updates`` calls of :meth:`update`, at a fixed
@@ -88,6 +105,10 @@ class VirlPPO(PPO):
 
     def update(self) -> dict[str, float]:
         """PPO's update, or the critic's alone while the actor is frozen (:meth:`freeze_actor`)."""
+        with self._learning_threads():
+            return self._update()
+
+    def _update(self) -> dict[str, float]:
         if self.frozen_updates <= 0:
             return super().update()
         self.frozen_updates -= 1
