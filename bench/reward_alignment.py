@@ -29,60 +29,16 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
-from scipy.stats import spearmanr
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.demo.render import ground_shifted
-from virl_quad.demo.score import record_episode, score_trajectory
-from virl_quad.demo.tracker import tracker_action
 from virl_quad.reward.config import RewardConfig
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 from virl_quad.reward.reward import build_reward
 from virl_quad.training import checkpoint
-
-SKIP = 10  # first frames of an episode left out (the sequence encoder warms up)
-
-
-def controllers(robot: str, cycle: float) -> dict[str, object]:
-    """name -> action(env, rng) for each controller."""
-    others = {g: demo_lib.load(g, robot).motion for g in ("pace", "bound")}
-    out: dict[str, object] = {"standing still": lambda env, rng: np.zeros(12),
-                              "random actions": lambda env, rng: rng.uniform(-1.0, 1.0, 12)}
-    for alpha in (0.25, 0.5, 0.75, 1.0):
-        out[f"tracker, alpha {alpha:g}"] = lambda env, rng, a=alpha: a * tracker_action(env)
-    for sigma in (0.3, 0.6):
-        out[f"tracker + noise {sigma:g}"] = lambda env, rng, s=sigma: tracker_action(env) + rng.normal(0.0, s, 12)
-    out["tracker, half a cycle late"] = lambda env, rng: tracker_action(env, delay=0.5 * cycle)
-    for g, m in others.items():
-        out[f"tracking the {g}"] = lambda env, rng, m=m: tracker_action(env, motion=m)
-    return out
-
-
-def rollout(robot: str, demo, act, seed: int, seconds: float, randomize: bool, ground: str,
-            speed_strip: bool = False):
-    """(agent frames, expert frames, ground-truth total) of one episode."""
-    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground,
-                    speed_strip=speed_strip)
-    rng = np.random.default_rng(seed)
-    agent, expert = [], []
-
-    def policy(obs: dict) -> np.ndarray:
-        """The controller's action; keeps the frames the reward would see at this step."""
-        agent.append(obs["agent_image"])
-        expert.append(obs["expert_image"])
-        return act(env, rng)
-
-    try:
-        obs, _ = env.reset(seed=seed)
-        traj, times, _ = record_episode(env, policy, obs)
-    finally:
-        env.close()
-    score = score_trajectory(traj, demo.motion, times, robot)["total"]
-    return np.array(agent), np.array(expert), float(score)
-
+from virl_quad.training.alignment import alignment, controllers, record, rollout, table
 
 def fresh_model(a: argparse.Namespace):
     """A distance model trained here (see the module doc); (model, demo, robot)."""
@@ -98,7 +54,7 @@ def fresh_model(a: argparse.Namespace):
     shifts = [envs.expert_frames(demo, spec, a.speed_strip, f)
               for f in ground_shifted(demo, robot, a.ground_shifts, a.ground)]
     rm = build_reward(cfg, envs.expert_frames(demo, spec, a.speed_strip), clips, 0, "cpu", shifts)
-    for name, act in controllers(robot, float(demo.motion.duration)).items():
+    for name, act in controllers(robot, float(demo.motion.duration), gait).items():
         for seed in range(1000, 1000 + a.train_seeds):
             agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground,
                                        a.speed_strip)
@@ -147,29 +103,18 @@ def main() -> int:
         a.ground = a.ground or demo.camera.get("ground") or DEFAULT_GROUND
     if demo.motion is None:
         raise SystemExit("error: the run's demonstration has no reference motion (the score needs one)")
-    rows, rewards, scores = [], [], []
-    for name, act in controllers(robot, float(demo.motion.duration)).items():
-        r_, s_ = [], []
-        for seed in range(a.seeds):
-            agent, expert, score = rollout(robot, demo, act, seed, a.seconds, not a.no_randomize, a.ground,
-                                           a.speed_strip)
-            with torch.no_grad():
-                d = rm.distance(torch.from_numpy(expert[:, None]), torch.from_numpy(agent[:, None]))[SKIP:, 0]
-            r_.append(float(torch.exp(rm.cfg.w_d * d ** 2).mean()))
-            s_.append(score)
-        rows.append((name, float(np.mean(r_)), float(np.mean(s_))))
-        rewards += r_
-        scores += s_
-        print(f"  {name:<30} reward {rows[-1][1]:.3f}  score {rows[-1][2]:.3f}", file=sys.stderr, flush=True)
+    gait = Path(str(demo.source or a.demo)).stem.removeprefix("gait:")
+    rollouts = record(robot, demo, gait, tuple(range(a.seeds)), a.seconds, not a.no_randomize, a.ground,
+                      a.speed_strip)
+    rho, rewards = alignment(rm, rollouts)
     what = f"a fresh {a.variant} model (adversarial {a.adversarial_weight:g})" if a.fresh else f"run {a.run_dir}"
     what += f", {a.ground} ground" + (", speed strip" if a.speed_strip else "")
     print(f"{what}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
           f"randomisation {'off' if a.no_randomize else 'on'}")
     print(f"{'controller':<32}{'reward':>8}{'score':>8}")
-    for name, r, s in sorted(rows, key=lambda row: -row[2]):
+    for name, r, s in table(rollouts, rewards):
         print(f"{name:<32}{r:8.3f}{s:8.3f}")
-    rho = spearmanr(rewards, scores).statistic
-    print(f"Spearman rank correlation reward vs score over {len(scores)} rollouts: {rho:+.2f}  (1: aligned, 0: none)")
+    print(f"Spearman rank correlation reward vs score over {len(rollouts)} rollouts: {rho:+.2f}  (1: aligned, 0: none)")
     return 0
 
 

@@ -1,42 +1,45 @@
-"""Throughput of the whole training loop and the share of each phase (run by hand).
+"""Throughput of the whole training loop against an earlier revision's, in one run (by hand).
 
-    python bench/train_throughput.py [--robot pupper] [--reward virl] [--iterations 5] [--repeats 3]
+    python bench/train_throughput.py [--against REV] [--repeats 3] [--iterations 10] [--robot pupper]
 
-Prints env steps/s of Algorithm 1 (rollout + distance-model updates + reward
-recomputation + PPO update), each phase's share of the iteration, and the
-ratio to the bare VecEnv throughput (same envs and workers, zero actions, no
-learning), for the physics and rendering of before the implicit PD and the numpy
-ground (:data:`BEFORE`) and for today's defaults, in the same run, alternating (``--repeats``), and the ratio of the two loops. The warm start
-(minutes before the first iteration) is left out.
+Env steps/s of Algorithm 1 (rollout + distance-model updates + reward recomputation + PPO
+update) with today's defaults, each phase's share of the iteration and the ratio to the bare
+VecEnv (same envs and workers, zero actions, no learning); and the same loop of revision
+``--against`` (default: the code before the gait prior, the implicit PD, the numpy ground and
+the multi-threaded learning phase), measured by that revision's own copy of this bench in a
+temporary git worktree. The two alternate ``--repeats`` times, each in a fresh process (this
+machine's speed drifts from minute to minute), and the ratio of each pair and their median are
+printed. The warm start (minutes before the first iteration) is left out.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
+import os
+import re
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 
-from virl_quad.envs import vec_env as vec_env_mod
 from virl_quad.envs.vec_env import QuadrupedVecEnv
 from virl_quad.train import build
 from virl_quad.training.config import TrainArgs
 
 
-#: the env of the training loop before the implicit PD and the numpy ground: explicit torque PD
-#: (Pupper at 1 kHz), TinyRenderer drawing the ground; its learning ran on one torch thread
-BEFORE = {"pupper": {"pd": "explicit", "sim_dt": 0.001, "substeps": 20, "ground_renderer": "tiny"},
-          "laikago": {"pd": "explicit", "ground_renderer": "tiny"}}
+#: the revision the loop is compared with by default: the code the training-throughput issue was filed on
+BASELINE_REV = "712ff41"
+_RATE = re.compile(r"training loop\s*:\s*([0-9.]+) env steps/s")
 
 
-def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int, physics: dict) -> float:
+def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int) -> float:
     """Env steps/s of the VecEnv alone (zero actions), same configuration as training."""
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=workers, seed=1, demo=demo,
-                          randomize=args.randomize, **physics)
+                          randomize=args.randomize)
     a = torch.zeros(args.num_envs, env.num_actions)
     env.step(a)
     t = time.perf_counter()
@@ -47,19 +50,10 @@ def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int, physics: 
     return rate
 
 
-def measure(args: TrainArgs, iterations: int, physics: dict, one_thread: bool = False
-            ) -> tuple[float, float, dict[str, float]]:
-    """(training-loop env steps/s, bare VecEnv env steps/s, seconds per iteration of each phase)
-    with the envs built with the ``physics`` overrides (``{}``: the defaults); ``one_thread``:
-    the distance model and PPO learn on one torch thread, as before (default: every core)."""
-    vec_env_mod.QuadrupedVecEnv = functools.partial(QuadrupedVecEnv, **physics)   # what build() constructs
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            demo, env, runner = build(args, Path(tmp), None)
-    finally:
-        vec_env_mod.QuadrupedVecEnv = QuadrupedVecEnv
-    if one_thread:
-        runner.alg.learn_threads = None
+def measure(args: TrainArgs, iterations: int) -> tuple[float, float, dict[str, float]]:
+    """(training-loop env steps/s, bare VecEnv env steps/s, seconds per iteration of each phase)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        demo, env, runner = build(args, Path(tmp), None)
     phases = {"rollout": 0.0, "distance-model updates": 0.0, "reward recompute": 0.0, "PPO update": 0.0}
     obs = env.get_observations()
     runner.alg.train_mode()
@@ -85,34 +79,56 @@ def measure(args: TrainArgs, iterations: int, physics: dict, one_thread: bool = 
     total = time.perf_counter() - t_all
     env.close()
     rate = iterations * args.num_envs * args.steps_per_env / total
-    bare = bare_vec_env_rate(args, demo, args.num_workers, args.steps_per_env * 2, physics)
+    bare = bare_vec_env_rate(args, demo, args.num_workers, args.steps_per_env * 2)
     return rate, bare, {k: v / iterations for k, v in phases.items()}
 
 
-def main(robot: str, reward: str, iterations: int, num_envs: int, steps_per_env: int, workers: int,
-         repeats: int) -> None:
-    """Measure the loop with the physics of before and with today's defaults, in one run, the two
-    alternating ``repeats`` times (this machine's speed drifts between minutes); print."""
+def measure_here(a: argparse.Namespace) -> None:
+    """Measure this tree's loop with its defaults; print the rate and the phases."""
     torch.set_num_threads(1)
-    args = TrainArgs(robot=robot, reward=reward, num_envs=num_envs, steps_per_env=steps_per_env,
-                     num_workers=workers, warm_start_rounds=0)
-    print(f"{robot}, reward {reward}: {num_envs} envs x {steps_per_env} steps, {workers} worker(s), "
-          f"{iterations} iterations per configuration, {repeats} repeat(s)")
-    rates: dict[str, list[float]] = {"before": [], "now": []}
-    for r in range(repeats):
-        for name, physics in (("before", BEFORE.get(robot, {})), ("now", {})):
-            rate, bare, phases = measure(args, iterations, physics, one_thread=name == "before")
-            rates[name].append(rate)
-            print(f"[{r + 1}/{repeats}] {name} ({physics or 'defaults'}"
-                  f"{', learning on one torch thread' if name == 'before' else ''}):")
-            print(f"  training loop       : {rate:8.1f} env steps/s")
-            print(f"  bare VecEnv         : {bare:8.1f} env steps/s   (loop / bare {rate / bare:.2f})")
-            total = sum(phases.values())
-            for phase, sec in phases.items():
-                print(f"  {phase:22s}: {sec:6.2f} s/iteration  {100 * sec / total:5.1f} %")
-        print(f"[{r + 1}/{repeats}] training loop now / before: {rates['now'][-1] / rates['before'][-1]:.2f}")
-    ratios = [n / b for n, b in zip(rates["now"], rates["before"])]
-    print(f"training loop now / before: median {statistics.median(ratios):.2f} "
+    args = TrainArgs(robot=a.robot, reward=a.reward, num_envs=a.num_envs, steps_per_env=a.steps_per_env,
+                     num_workers=a.workers, warm_start_rounds=0)
+    rate, bare, phases = measure(args, a.iterations)
+    print(f"  training loop       : {rate:8.1f} env steps/s")
+    print(f"  bare VecEnv         : {bare:8.1f} env steps/s   (loop / bare {rate / bare:.2f})")
+    total = sum(phases.values())
+    for phase, sec in phases.items():
+        print(f"  {phase:22s}: {sec:6.2f} s/iteration  {100 * sec / total:5.1f} %")
+
+
+def _run(cmd: list[str], cwd: Path, pythonpath: Path) -> float:
+    """Run one measurement process; its output's training-loop rate (env steps/s)."""
+    env = {**os.environ, "PYTHONPATH": str(pythonpath)}
+    p = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
+    found = _RATE.search(p.stdout)
+    if p.returncode != 0 or not found:
+        raise SystemExit(f"error: measurement failed in {cwd}: {(p.stderr or p.stdout).strip().splitlines()[-1:]}")
+    print("\n".join(line for line in p.stdout.splitlines() if line.startswith("  ")), flush=True)
+    return float(found.group(1))
+
+
+def main(a: argparse.Namespace) -> None:
+    """Alternate the revision's loop and today's, print each rate, each pair's ratio and the median."""
+    here = Path(__file__).resolve().parents[1]
+    common = ["--robot", a.robot, "--reward", a.reward, "--iterations", str(a.iterations), "--num-envs",
+              str(a.num_envs), "--steps-per-env", str(a.steps_per_env), "--workers", str(a.workers)]
+    print(f"{a.robot}, reward {a.reward}: {a.num_envs} envs x {a.steps_per_env} steps, {a.workers} worker(s), "
+          f"{a.iterations} iterations per measurement, against {a.against}, {a.repeats} repeat(s)", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "baseline"
+        subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", "-q", str(old), a.against], check=True)
+        try:
+            ratios = []
+            for r in range(a.repeats):
+                print(f"[{r + 1}/{a.repeats}] {a.against}:", flush=True)
+                before = _run([sys.executable, str(old / "bench" / "train_throughput.py"), *common], old, old)
+                print(f"[{r + 1}/{a.repeats}] today's defaults:", flush=True)
+                now = _run([sys.executable, str(Path(__file__).resolve()), "--here", *common], here, here)
+                ratios.append(now / before)
+                print(f"[{r + 1}/{a.repeats}] training loop today / {a.against}: {ratios[-1]:.2f}", flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(old)], check=False)
+    print(f"training loop today / {a.against}: median {statistics.median(ratios):.2f} "
           f"(each repeat: {', '.join(f'{x:.2f}' for x in ratios)})")
 
 
@@ -120,10 +136,12 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="pupper")
     parser.add_argument("--reward", default="virl")
-    parser.add_argument("--iterations", type=int, default=5)
+    parser.add_argument("--iterations", type=int, default=10, help="timed iterations per measurement")
     parser.add_argument("--num-envs", type=int, default=16)
     parser.add_argument("--steps-per-env", type=int, default=64)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--repeats", type=int, default=3, help="before/now pairs, alternating")
-    a = parser.parse_args()
-    main(a.robot, a.reward, a.iterations, a.num_envs, a.steps_per_env, a.workers, a.repeats)
+    parser.add_argument("--repeats", type=int, default=3, help="revision/today pairs, alternating")
+    parser.add_argument("--against", default=BASELINE_REV, help="git revision to compare with")
+    parser.add_argument("--here", action="store_true", help="measure this tree once and print (used by the pairs)")
+    ns = parser.parse_args()
+    measure_here(ns) if ns.here else main(ns)

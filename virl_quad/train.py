@@ -237,6 +237,7 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             runner.standing = _evaluate(args, demo, zero_policy)
             log(f"holding the default pose scores {runner.standing['total']:.3f} (the bar: 1.00x standing), "
                 f"speed {runner.standing['speed_ratio']:.2f}, falls {runner.standing['falls']}")
+        _attach_alignment_probe(args, demo, runner, log)
         if data is None:
             _warm_start(args, demo, runner, log)
         runner.train(args.iterations, args.minutes, args.save_every, args.eval_every, log=log)
@@ -244,6 +245,23 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         env.close()
     finish(args, run_dir, demo, runner, log)
     return 0
+
+
+def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
+    """With a learned reward and a reference motion: record the alignment probe's graded
+    rollouts and measure the untrained reward on them (``--alignment-probe``)."""
+    model = getattr(runner.reward_source, "model", None)
+    if not args.alignment_probe or model is None or demo.motion is None:
+        return
+    from virl_quad.training.alignment import AlignmentProbe
+
+    t0 = time.time()
+    gait = Path(str(args.demo)).stem.removeprefix("gait:")
+    runner.alignment_probe = AlignmentProbe(args.robot, demo, gait, randomize=args.randomize, ground=args.ground,
+                                            speed_strip=args.speed_strip)
+    first = runner.alignment_probe.probe(model)
+    log(f"alignment probe: {len(runner.alignment_probe.rollouts)} graded rollouts ({time.time() - t0:.0f} s); "
+        f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}")
 
 
 def _warm_start(args: TrainArgs, demo, runner, log) -> None:
@@ -301,6 +319,14 @@ def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dic
                     **(actions or {}))
 
 
+def _alignment_curve(path: Path) -> list[list[float]]:
+    """[[iteration, env steps, rank correlation], ...] of the run's evaluations that probed it."""
+    if not path.exists():
+        return []
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [[r["iteration"], r.get("env_steps", 0), r["reward_alignment"]] for r in rows if "reward_alignment" in r]
+
+
 def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
@@ -317,6 +343,10 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
               "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final,
               "standing": runner.standing}
+    model = getattr(runner.reward_source, "model", None)
+    if runner.alignment_probe is not None and model is not None:
+        report["reward_alignment"] = {**runner.alignment_probe.probe(model),
+                                      "curve": _alignment_curve(run_dir / "evaluations.jsonl")}
     write_report(run_dir / "report.json", report)
     summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),
                             "iteration": runner.current_learning_iteration}, runner.standing)

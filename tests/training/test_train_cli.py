@@ -19,16 +19,17 @@ from virl_quad.training import checkpoint
 
 TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--eval-episodes", "1",
         "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1",
-        "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1"]
+        "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1", "--no-alignment-probe"]
 
 
 def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
 
 
-#: Pupper also runs with the plain ground, the speed strip, a distance-model warm-up and the model frozen after 2 iterations.
+#: Pupper also runs with the plain ground, the speed strip, a distance-model warm-up and the model frozen after
+#: 2 iterations; Laikago with the reward's alignment probe.
 EXTRA = {"pupper": ["--ground", "plain", "--speed-strip", "--reward-freeze-after", "2", "--reward-warmup", "3"],
-         "laikago": []}
+         "laikago": ["--alignment-probe", "--eval-every", "2"]}
 
 
 @pytest.mark.parametrize("robot", ["pupper", "laikago"])
@@ -49,6 +50,12 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     log = (run_dir / "train.log").read_text()
     assert "it     2/2" in log and "holding the default pose scores" in log
     assert report["standing"]["total"] > 0 and "x standing, speed" in p.stdout, p.stdout[-2000:]
+    if robot == "laikago":   # the probe: at the start, at every evaluation (the curve) and in the report
+        assert "alignment probe: 22 graded rollouts" in p.stdout, p.stdout[-2000:]
+        assert "reward-score rank corr" in p.stdout
+        align = report["reward_alignment"]
+        assert -1 <= align["reward_alignment"] <= 1 and 0 <= align["reward_standing"] <= 1
+        assert [row[0] for row in align["curve"]] == [0, 2], align["curve"]   # warm start, iteration 2
     # resume continues from iteration 2
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
     assert p.returncode == 0, p.stderr[-2000:]

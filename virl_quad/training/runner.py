@@ -37,14 +37,17 @@ def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
 def eval_summary(result: dict, standing: dict) -> str:
     """The last ground-truth evaluation for a person: the score as a multiple of holding the
     default pose (below 1x the policy is worse than standing still), the forward-speed ratio
-    to the demonstration and the falls, with the iteration it was taken at ("-" before one)."""
+    to the demonstration and the falls, with the iteration it was taken at ("-" before one);
+    with a learned reward, its rank correlation with the score on the alignment probe."""
     if "total" not in result:
         return "-"
     base = standing.get("total")
     score = f"{result['total'] / base:.2f}x standing" if base else f"score {result['total']:.3f}"
     episodes = int(result.get("episodes_run", 0))
     falls = f"falls {int(result.get('falls', 0))}" + (f"/{episodes}" if episodes else "")
-    return f"{score}, speed {result.get('speed_ratio', float('nan')):.2f}, {falls} @{result.get('iteration', '?')}"
+    align = f", reward-score rank corr {result['reward_alignment']:+.2f}" if "reward_alignment" in result else ""
+    return (f"{score}, speed {result.get('speed_ratio', float('nan')):.2f}, {falls}{align} "
+            f"@{result.get('iteration', '?')}")
 
 
 class VirlRunner(OnPolicyRunner):
@@ -59,6 +62,7 @@ class VirlRunner(OnPolicyRunner):
         self.run_dir = Path(run_dir)
         self.config = config
         self.evaluate_fn = evaluate
+        self.alignment_probe = None   # an AlignmentProbe: the learned reward's rank agreement with the score
         self.env_steps = 0
         self.wall_time = 0.0
         self.last_eval: dict = {}
@@ -170,6 +174,9 @@ class VirlRunner(OnPolicyRunner):
                           **{k: float(v) for k, v in result.items() if isinstance(v, (int, float))}}
         if self.standing.get("total"):
             self.last_eval["score_vs_standing"] = self.last_eval.get("total", float("nan")) / self.standing["total"]
+        model = getattr(self.reward_source, "model", None)
+        if self.alignment_probe is not None and model is not None:
+            self.last_eval.update(self.alignment_probe.probe(model))
         with open(self.run_dir / "evaluations.jsonl", "a") as f:   # the learning curve, one line per evaluation
             f.write(json.dumps({**self.last_eval, "env_steps": self.env_steps, "wall_time_s": self.wall_time}) + "\n")
         writer = self._open_writer()

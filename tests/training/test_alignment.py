@@ -1,0 +1,37 @@
+"""The alignment probe: a graded set of real rollouts, scored by a real distance model."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from virl_quad import demo as demo_lib
+from virl_quad import envs, robots
+from virl_quad.reward import RewardConfig, build_reward
+from virl_quad.training.alignment import AlignmentProbe, alignment, record, table
+
+
+def test_probe_rollouts_are_graded_and_a_model_ranks_them() -> None:
+    demo = demo_lib.load("trot", "pupper")
+    rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=1.5)
+    names = [r.controller for r in rollouts]
+    assert len(names) == len(set(names)) == 11 and "tracking the trot" not in names   # its own gait is no negative
+    assert all(r.agent.shape == r.expert.shape and r.agent.shape[1:] == (48, 48) for r in rollouts)
+    score = {r.controller: r.score for r in rollouts}
+    assert score["tracker, alpha 1"] > score["standing still"] > score["random actions"]   # the set is graded
+    model = build_reward(RewardConfig(), envs.expert_frames(demo, robots.get("pupper"), False), [], 0, "cpu")
+    rho, rewards = alignment(model, rollouts)
+    assert -1.0 <= rho <= 1.0 and len(rewards) == len(rollouts)
+    assert all(0.0 <= w <= 1.0 for w in rewards)
+    rows = table(rollouts, rewards)
+    assert [r[2] for r in rows] == sorted((r[2] for r in rows), reverse=True)   # best score first
+
+
+def test_a_reward_that_ranks_nothing_aligns_zero() -> None:
+    demo = demo_lib.load("trot", "pupper")
+    probe = AlignmentProbe.__new__(AlignmentProbe)
+    probe.rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=0.5)
+    for r in probe.rollouts:                    # every rollout shows the demonstration itself: one reward for all
+        r.agent = r.expert = np.asarray(demo.frames[:len(r.agent)])
+    model = build_reward(RewardConfig(), envs.expert_frames(demo, robots.get("pupper"), False), [], 0, "cpu")
+    out = probe.probe(model)
+    assert out["reward_alignment"] == 0.0 and out["reward_standing"] == out["reward_best"]
