@@ -8,7 +8,7 @@ import sys
 import pytest
 
 MODULES = ["virl_quad.train", "virl_quad.export", "virl_quad.evaluate", "virl_quad.check", "virl_quad.demo",
-           "virl_quad.deploy.hal", "virl_quad.deploy.serve"]
+           "virl_quad.deploy.hal", "virl_quad.deploy.serve", "virl_quad.compare"]
 
 
 @pytest.mark.parametrize("module", MODULES)

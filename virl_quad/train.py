@@ -26,7 +26,7 @@ import torch
 
 from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
 from virl_quad.training import checkpoint
-from virl_quad.training.config import TrainArgs, rsl_rl_config, to_dict, validate
+from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, rsl_rl_config, to_dict, validate
 
 
 def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
@@ -70,7 +70,7 @@ def _load_demo(args: TrainArgs, run_dir: Path):
     saved = run_dir / "demo.npz"
     if saved.exists():
         d = demo_lib.load(str(saved), args.robot)
-        if args.reward != "oracle":
+        if args.reward not in FRAMELESS_REWARDS:
             _check_same_rendering(d, args)
         return d
     d = demo_lib.load(args.demo, args.robot, ground=args.ground)
@@ -171,7 +171,7 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None) -> dict:
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
     from virl_quad.envs.vec_env import QuadrupedVecEnv
-    from virl_quad.training.rewards import EnvReward, LearnedReward
+    from virl_quad.training.rewards import EnvReward, LearnedReward, SurvivalReward
     from virl_quad.training.runner import VirlRunner
 
     demo = _load_demo(args, run_dir)
@@ -184,18 +184,21 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
-                          oracle_reward=oracle, ground=args.ground, render=not oracle,   # oracle: no frames needed
+                          oracle_reward=oracle, ground=args.ground,
+                          render=args.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
                           speed_strip=args.speed_strip, **action_options)
-    source = EnvReward() if oracle else LearnedReward(args.reward, _frames(demo, args), args.num_envs,
-                                                      args.reward_updates, args.seed, args.device,
-                                                      lr=args.reward_lr, cyclic=demo.loop,
-                                                      w_d=args.reward_wd,
-                                                      other_clips=_other_clips(args, run_dir),
-                                                      adversarial_weight=args.adversarial_weight,
-                                                      demo_variants=_ground_shifts(args, demo),
-                                                      freeze_after=args.reward_freeze_after,
-                                                      speed_strip=args.speed_strip,
-                                                      speed_shift_weight=args.speed_shift_weight)
+    if oracle:
+        source = EnvReward()
+    elif args.reward == "prior":
+        source = SurvivalReward()
+    else:
+        source = LearnedReward(args.reward, _frames(demo, args), args.num_envs, args.reward_updates, args.seed,
+                               args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
+                               other_clips=_other_clips(args, run_dir),
+                               adversarial_weight=args.adversarial_weight,
+                               demo_variants=_ground_shifts(args, demo),
+                               freeze_after=args.reward_freeze_after, speed_strip=args.speed_strip,
+                               speed_shift_weight=args.speed_shift_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),

@@ -11,7 +11,9 @@ from dataclasses import dataclass, field
 
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 
-REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle")
+REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
+#: rewards that need no frames: the env's ground-truth score (oracle) or survival alone (prior)
+FRAMELESS_REWARDS = ("oracle", "prior")
 
 
 @dataclass
@@ -20,7 +22,7 @@ class TrainArgs:
 
     robot: str = "pupper"              # robot to train (pupper or laikago)
     demo: str = "trot"                 # demonstration: built-in gait name, .npz, motion file (.txt/.json) or video file
-    reward: str = field(default="virl", metadata={"choices": REWARDS})  # reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, or oracle (ground-truth pose reward, an upper bound)
+    reward: str = field(default="virl", metadata={"choices": REWARDS})  # reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, oracle (ground-truth pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and warm start give alone)
     num_envs: int = 16                 # parallel simulated robots
     num_workers: int = -1              # env worker processes (-1: one per CPU core)
     iterations: int = 1000             # PPO iterations to run (an upper bound when --minutes is given)

@@ -9,7 +9,9 @@ returns the rollout's rewards [T, N] (``finish``):
   recomputes every reward of the rollout with the updated model (after
   ``freeze_after`` rollouts, if set, the model stops learning: a fixed reward);
 - :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
-  pose-imitation reward, the upper bound of the comparison).
+  pose-imitation reward, the upper bound of the comparison);
+- :class:`SurvivalReward`: 1 per step the robot is up (``prior``: no imitation reward at all,
+  the baseline a learned reward must beat to add anything to the gait prior and warm start).
 """
 
 from __future__ import annotations
@@ -132,3 +134,11 @@ class EnvReward:
 
     def load_state_dict(self, d: dict) -> None:
         """Nothing to restore."""
+
+
+class SurvivalReward(EnvReward):
+    """1 per step: a fall ends the episode, so the return counts the steps the robot stays up."""
+
+    def observe(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
+        """Keep a reward of 1 for this step."""
+        self._rewards.append(torch.ones_like(rewards, dtype=torch.float32).cpu())
