@@ -71,11 +71,13 @@ def main() -> None:
     p.add_argument("--minutes", type=float, default=10.0, help="wall-clock budget of each learning arm")
     p.add_argument("--eval-every", type=int, default=20, help="iterations between evaluations")
     p.add_argument("--out", default="learning_curves.png", help="PNG to write")
+    p.add_argument("--runs-dir", default="", help="keep the arms' run folders here (default: a temporary folder)")
     a = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        runs = {name: train(Path(tmp) / name, a.robot, a.demo, a.reward, a.minutes, a.eval_every, extra)
+        where = Path(a.runs_dir or tmp)
+        runs = {name: train(where / name, a.robot, a.demo, a.reward, a.minutes, a.eval_every, extra)
                 for name, extra in (("scratch", SCRATCH), ("residual", []))}
-        standing = json.loads((Path(tmp) / "residual" / "report.json").read_text())["standing"]["total"]
+        standing = json.loads((where / "residual" / "report.json").read_text())["standing"]["total"]
     prior = prior_only(a.robot, a.demo, 2)
     warm = runs["residual"][0]
     rows = [("scratch", runs["scratch"][-1]), ("prior", {**prior, "env_steps": 0, "wall_time_s": 0.0}),
