@@ -57,7 +57,7 @@ def main() -> int:
     ax.axhline(a.bar, color="gray", ls="--", label=f"bar {a.bar:g}")
     ax.axhline(1.0, color="black", lw=0.8)
     ax.set_xlabel("env steps")
-    ax.legend(loc="lower right")
+    ax.legend(loc="center right", fontsize="small")
     ax.set_title(f"{a.run_dir.name}: learned reward alignment and ground-truth score")
     fig.tight_layout()
     fig.savefig(a.out, dpi=100)
