@@ -29,7 +29,8 @@ def test_tiny_comparison_writes_table_and_plots(tmp_path: Path) -> None:
     table = (out / "results.md").read_text()
     assert "| oracle |" in table and "| prior |" in table and "x standing" in table
     assert (out / "curves.png").stat().st_size > 1000 and (out / "scores.png").stat().st_size > 1000
-    assert "--reward prior" in (out / "prior.log").read_text() or (out / "prior" / "train.log").exists()
+    for name in ("oracle", "prior"):                     # each run trained with its own reward
+        assert json.loads((out / name / "config.json").read_text())["reward"] == name
 
 
 def test_unknown_reward_is_one_error_line(tmp_path: Path) -> None:

@@ -72,8 +72,6 @@ class EnvConfig:
     pd: str = "implicit"                   # how the joint PD is stepped: "implicit" (PyBullet's joint motors)
                                            # or "explicit" (torques; needs a 1 ms physics step on Pupper),
                                            # see virl_quad.sim.pd
-    ground_renderer: str = "numpy"         # who draws the ground in frames: "numpy" (virl_quad.sim.ground)
-                                           # or "tiny" (TinyRenderer: the same frames, slower)
     tg: TGParams | None = None             # trajectory generator the policy acts as a residual on (action
                                            # size 14); None: actions are offsets from the default pose (12)
 
@@ -133,7 +131,7 @@ class QuadrupedEnv(gym.Env):
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
-        self.world = World(spec, ground=_ground(cfg), pd=cfg.pd, ground_renderer=cfg.ground_renderer)
+        self.world = World(spec, ground=_ground(cfg), pd=cfg.pd)
         self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig.for_robot(spec) if cfg.randomize else DRConfig.off())
         self.demo = cfg.demo
         if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:

@@ -4,7 +4,7 @@ The camera keeps a fixed world yaw (it does not turn with the robot, so a turn
 is visible) and renders with PyBullet's CPU TinyRenderer, which works headless.
 Frames are 48x48 grayscale uint8, the VIRL observation; a larger RGB preview
 is available for videos. Given a ``ground``, the ground plane is drawn in numpy behind
-TinyRenderer's render of the robot (:mod:`virl_quad.sim.ground`), several times cheaper than
+TinyRenderer's render of the robot (:mod:`virl_quad.sim.ground`), far cheaper than
 TinyRenderer's own.
 """
 

@@ -1,8 +1,8 @@
 """The ground the follow camera sees, drawn in numpy instead of by TinyRenderer.
 
 The ground is a flat plane at z = 0 with a gray pattern (:data:`GROUNDS`). TinyRenderer
-spends most of a 48x48 frame on the plane's pixels (0.4-0.5 ms of 0.65 ms), although every
-one of them is a ray-plane intersection and a table look-up. :func:`composite` therefore
+spends most of a 48x48 frame on the plane's pixels, although every one of them is a
+ray-plane intersection and a table look-up. :func:`composite` therefore
 renders only the robot with TinyRenderer and draws the ground behind it from the same view
 and projection matrices: the same pixel centres, the same depth test, the same gray levels
 (TinyRenderer's flat lighting of an upward plane), identical to TinyRenderer's own ground up

@@ -53,7 +53,7 @@ class World:
     :data:`~virl_quad.sim.params.GROUNDS`); ``pd``: how the joint PD is stepped, one of
     :data:`~virl_quad.sim.pd.PD_MODES`; ``ground_renderer``: who draws the ground in renders,
     ``"numpy"`` (the default, :mod:`virl_quad.sim.ground`) or ``"tiny"`` (TinyRenderer, the
-    reference: the same picture, several times slower)."""
+    reference the numpy ground is tested against: the same picture, slower)."""
 
     def __init__(self, spec: RobotSpec, *, ghost: bool = False, ground: str = DEFAULT_GROUND,
                  pd: str = "implicit", ground_renderer: str = "numpy") -> None:

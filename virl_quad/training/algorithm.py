@@ -94,8 +94,7 @@ class VirlPPO(PPO):
         st.rewards.copy_(new_rewards + self.gamma * st.values * time_outs)
         info["reward_mean"] = float(new_rewards.mean())
         self.last_reward_info = info
-        with self._learning_threads():
-            super().compute_returns(obs)
+        super().compute_returns(obs)
 
     def freeze_actor(self, updates: int) -> None:
         """Fit the critic alone in the next ``updates`` calls of :meth:`update`, at a fixed

@@ -59,7 +59,7 @@ class TrainArgs:
     warm_start_steps: int = 4000       # control steps gathered per warm-start round
     critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
     symmetry: bool = False             # rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg: the mirror shifts the gait clock by the TG's leg offsets)
-    alignment_probe: bool = True       # with a learned reward: at every evaluation, the rank correlation of the reward with the ground-truth score over a fixed graded set of rollouts (tracker variants, standing, other gaits, random; recorded once at the start, about 10 s), logged beside the score
+    alignment_probe: bool = True       # with a learned reward: at every evaluation, the rank correlation of the reward with the ground-truth score over a fixed graded set of rollouts (tracker variants, standing, other gaits, random; recorded once at the start), logged beside the score
     tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
 
 
