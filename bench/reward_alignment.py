@@ -32,7 +32,6 @@ from pathlib import Path
 import torch
 
 from virl_quad import demo as demo_lib
-from virl_quad import envs, robots
 from virl_quad.demo.render import ground_shifted
 from virl_quad.reward.config import RewardConfig
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
@@ -46,21 +45,17 @@ def fresh_model(a: argparse.Namespace):
 
     robot, gait = a.robot, a.demo
     demo = demo_lib.load(gait, robot, ground=a.ground)
-    spec = robots.get(robot)
-    clips = [envs.expert_frames(demo_lib.load(g, robot, ground=a.ground), spec, a.speed_strip)
-             for g in GAIT_NAMES if g != gait]
+    clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
-    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights, speed_strip=a.speed_strip)
-    shifts = [envs.expert_frames(demo, spec, a.speed_strip, f)
-              for f in ground_shifted(demo, robot, a.ground_shifts, a.ground)]
-    rm = build_reward(cfg, envs.expert_frames(demo, spec, a.speed_strip), clips, 0, "cpu", shifts)
+    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
+    shifts = ground_shifted(demo, robot, a.ground_shifts, a.ground)
+    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", shifts)
     for name, act in controllers(robot, float(demo.motion.duration), gait).items():
         for seed in range(1000, 1000 + a.train_seeds):
-            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground,
-                                       a.speed_strip)
+            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)
             rm.add_episode(agent, expert)
     print(f"training a fresh {a.variant} model on the {a.ground} ground: {a.updates} updates, adversarial "
-          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts, speed strip {'on' if a.speed_strip else 'off'}", file=sys.stderr, flush=True)
+          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts", file=sys.stderr, flush=True)
     for k in range(0, a.updates, 100):
         info = rm.update(min(100, a.updates - k))
         print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
@@ -82,8 +77,6 @@ def main() -> int:
     p.add_argument("--ground", choices=GROUNDS, help="ground of the renders (default: the run's demonstration's, "
                    "else checker; give it for a run whose demonstration does not record it)")
     p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders (checker only)")
-    p.add_argument("--speed-strip", action="store_true", help="--fresh: frames carry the speed strip "
-                   "(a run's own setting is used for RUN_DIR)")
     p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
     p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
     p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")
@@ -97,18 +90,16 @@ def main() -> int:
     else:
         try:
             rm, demo, _, robot = checkpoint.load_reward_model(a.run_dir)
-            a.speed_strip = bool(checkpoint.load(a.run_dir)["config"].get("speed_strip", False))
         except ValueError as e:
             raise SystemExit(f"error: {e}") from None
         a.ground = a.ground or demo.camera.get("ground") or DEFAULT_GROUND
     if demo.motion is None:
         raise SystemExit("error: the run's demonstration has no reference motion (the score needs one)")
     gait = Path(str(demo.source or a.demo)).stem.removeprefix("gait:")
-    rollouts = record(robot, demo, gait, tuple(range(a.seeds)), a.seconds, not a.no_randomize, a.ground,
-                      a.speed_strip)
+    rollouts = record(robot, demo, gait, tuple(range(a.seeds)), a.seconds, not a.no_randomize, a.ground)
     rho, rewards = alignment(rm, rollouts)
     what = f"a fresh {a.variant} model (adversarial {a.adversarial_weight:g})" if a.fresh else f"run {a.run_dir}"
-    what += f", {a.ground} ground" + (", speed strip" if a.speed_strip else "")
+    what += f", {a.ground} ground"
     print(f"{what}: {robot}, {demo.source}; {a.seeds} rollouts of {a.seconds:g} s per controller, "
           f"randomisation {'off' if a.no_randomize else 'on'}")
     print(f"{'controller':<32}{'reward':>8}{'score':>8}")

@@ -40,9 +40,9 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
     return set(vars(probe.parse_known_args(argv)[0]))
 
 
-#: Options added after runs were made, with the value that reproduces those runs on resume.
-LEGACY: dict[str, object] = {"speed_strip": False, "reward_freeze_after": 0, "speed_shift_weight": 1.0,
-                              "reward_warmup": 0, "tg": False}
+#: Options added after runs were made, with the value that reproduces those runs on resume. Saved
+#: options that no longer exist (retired features) are dropped on resume.
+LEGACY: dict[str, object] = {"tg": False}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
@@ -115,7 +115,7 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
         sources = []
     else:
         sources = [s.strip() for s in choice.split(",") if s.strip()]
-    clips = [_frames(demo_lib.load(s, args.robot, ground=args.ground), args) for s in sources]
+    clips = [demo_lib.load(s, args.robot, ground=args.ground).frames for s in sources]
     run_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(saved, **{f"clip{i:02d}": c for i, c in enumerate(clips)})
     if sources:
@@ -123,23 +123,11 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
     return clips
 
 
-def _frames(demo, args: TrainArgs, frames: np.ndarray | None = None) -> np.ndarray:
-    """``frames`` (default: the demonstration's) as the env shows them to the distance model:
-    with the demonstration's speed strip under ``--speed-strip``."""
-    from virl_quad import robots
-    from virl_quad.envs import expert_frames
-
-    try:
-        return expert_frames(demo, robots.get(args.robot), args.speed_strip, frames)
-    except ValueError as e:
-        raise UserError(str(e)) from None
-
-
 def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     """Ground-shift positives for the distance model (see render.ground_shifted)."""
     from virl_quad.demo.render import ground_shifted
 
-    out = [_frames(demo, args, f) for f in ground_shifted(demo, args.robot, args.ground_shifts, args.ground)]
+    out = ground_shifted(demo, args.robot, args.ground_shifts, args.ground)
     if out:
         print(f"ground-shift positives: the demonstration re-rendered at {len(out)} offsets along the ground",
               flush=True)
@@ -186,19 +174,17 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
                           oracle_reward=oracle, ground=args.ground,
                           render=args.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
-                          speed_strip=args.speed_strip, **action_options)
+                          **action_options)
     if oracle:
         source = EnvReward()
     elif args.reward == "prior":
         source = SurvivalReward()
     else:
-        source = LearnedReward(args.reward, _frames(demo, args), args.num_envs, args.reward_updates, args.seed,
+        source = LearnedReward(args.reward, demo.frames, args.num_envs, args.reward_updates, args.seed,
                                args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
                                other_clips=_other_clips(args, run_dir),
                                adversarial_weight=args.adversarial_weight,
-                               demo_variants=_ground_shifts(args, demo),
-                               freeze_after=args.reward_freeze_after, speed_strip=args.speed_strip,
-                               speed_shift_weight=args.speed_shift_weight)
+                               demo_variants=_ground_shifts(args, demo))
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
@@ -230,8 +216,6 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         if data is not None:
             runner.restore(data)
             log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps)")
-        elif args.reward_warmup > 0 and hasattr(runner.reward_source, "warm_up"):
-            runner.reward_source.warm_up(args.reward_warmup, log=log)
         log(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
         if not runner.standing and demo.motion is not None:
@@ -260,8 +244,7 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
 
     t0 = time.time()
     gait = Path(str(args.demo)).stem.removeprefix("gait:")
-    runner.alignment_probe = AlignmentProbe(args.robot, demo, gait, randomize=args.randomize, ground=args.ground,
-                                            speed_strip=args.speed_strip)
+    runner.alignment_probe = AlignmentProbe(args.robot, demo, gait, randomize=args.randomize, ground=args.ground)
     first = runner.alignment_probe.probe(model)
     log(f"alignment probe: {len(runner.alignment_probe.rollouts)} graded rollouts ({time.time() - t0:.0f} s); "
         f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -148,28 +146,3 @@ def test_env_draws_the_demonstration_ground_and_refuses_another() -> None:
     env.close()
     with pytest.raises(ValueError, match="ground"):
         make("pupper", demo=plain, ground="checker")
-
-
-def test_speed_strip_shows_the_travel_of_agent_and_demonstration() -> None:
-    from virl_quad import demo as demo_lib
-    from virl_quad.sim.strip import SPEED_WINDOW, STRIP_ROWS, stamp_speed
-
-    trot = demo_lib.load("trot", "pupper", ground="plain")
-    speed = trot.forward_speed(SPEED_WINDOW)
-    np.testing.assert_allclose(speed, 0.25, atol=1e-9)            # m/s, the built-in trot's speed
-    env = make("pupper", demo=trot, randomize=False, speed_strip=True)
-    spec = env.unwrapped.robot
-    obs, _ = env.reset(seed=0, options={"demo_step": 7})
-    want = stamp_speed(trot.frames[7], 0.25, spec.strip_full_speed)
-    np.testing.assert_array_equal(obs["expert_image"], want)
-    np.testing.assert_array_equal(obs["expert_image"][:-STRIP_ROWS], trot.frames[7][:-STRIP_ROWS])
-    for _ in range(25):                                             # holding the default pose: no travel
-        obs, *_ = env.step(np.zeros(12))
-    bar = obs["agent_image"][-1].astype(int)
-    lit_expert = int((obs["expert_image"][-1] > 127).sum())
-    assert lit_expert == 12                                         # 0.25 m/s of 0.5: a quarter of the width
-    assert (bar > 127).sum() <= 2, bar                              # the standing agent's bar is (near) empty
-    env.close()
-    video = dataclasses.replace(trot, displacement=None, motion=None, source="a video")
-    with pytest.raises(ValueError, match="displacement"):
-        make("pupper", demo=video, speed_strip=True)

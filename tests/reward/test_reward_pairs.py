@@ -102,7 +102,7 @@ def test_sampler_batches_half_positive_and_every_kind(small_cfg, demo, other, ag
         for k, lab in zip(batch.kinds, batch.y):
             assert (k in POSITIVE_PAIRS) == (lab == 1) and (k in NEGATIVE_PAIRS) == (lab == 0)
         kinds |= set(batch.kinds)
-    assert kinds == set(POSITIVE_PAIRS) | set(NEGATIVE_PAIRS) - {"speed_shift"}   # frames without the strip
+    assert kinds == set(POSITIVE_PAIRS) | set(NEGATIVE_PAIRS)
     # augmentations are applied on the fly, never stored
     assert rm.dataset.nbytes == nbytes and len(rm.dataset) == len(stored)
     assert all((rm.dataset.episode(i)[0] == stored[i]).all() for i in range(len(stored)))
@@ -132,24 +132,3 @@ def test_other_clip_only_with_clips_and_weights(small_cfg, demo):
     assert "reversed" not in rm.sampler.available(8, have_agent=True)[1]
     with pytest.raises(ValueError, match="pair_weights"):
         RewardConfig(pair_weights={"nope": 1.0}).validate()
-
-
-def test_speed_shift_negatives_change_only_the_strip_and_need_it(small_cfg, demo, other):
-    import dataclasses
-
-    from virl_quad.sim import strip
-
-    x = strip.stamp_speed(np.full((9, 48, 48), 90, np.uint8), np.linspace(0.1, 0.3, 9), 0.5) / np.float32(255)
-    for seed in range(20):
-        a, b, y = pairs.speed_shift(x, np.random.default_rng(seed))
-        assert y == 0 and a.shape == b.shape == (8, 48, 48)
-        np.testing.assert_array_equal(a[:, :-strip.STRIP_ROWS], b[:, :-strip.STRIP_ROWS])
-        moved = np.abs(strip.bar_px(b) - strip.bar_px(a))
-        assert np.all((moved > 3.9) & (moved < 16.1)), moved                # another speed, 4..16 px
-    cfg = dataclasses.replace(small_cfg, speed_strip=True)
-    rm = build_reward(cfg, demo, [other], seed=0)
-    kinds = set()
-    rng = np.random.default_rng(1)
-    for _ in range(40):
-        kinds |= set(rm.sampler.draw(rng).kinds)
-    assert "speed_shift" in kinds

@@ -128,22 +128,3 @@ def test_ground_choices_render_differently_and_unknown_is_refused() -> None:
     assert lower.std() < 2.0 and checker[40:].std() > 10.0
     with pytest.raises(ValueError, match="unknown ground"):
         World(spec, ground="grass")
-
-
-def test_speed_strip_draws_a_bar_from_the_centre_continuous_in_the_speed() -> None:
-    from virl_quad.sim.strip import STRIP_ROWS, stamp_speed
-
-    frames = np.full((3, 48, 48), 120, np.uint8)
-    out = stamp_speed(frames, np.array([0.0, 0.25, -0.5]), full_speed=0.5)
-    np.testing.assert_array_equal(out[:, :-STRIP_ROWS], frames[:, :-STRIP_ROWS])   # the image above is kept
-    assert frames[0, -1, 0] == 120                                                   # input untouched
-    assert not out[0, -STRIP_ROWS:].any()                                            # no travel: all black
-    assert (out[1, -1, 24:36] == 255).all() and not out[1, -1, :24].any() and not out[1, -1, 36:].any()
-    assert (out[2, -1, :24] == 255).all() and not out[2, -1, 24:].any()              # backwards, full scale
-    lit = [int(stamp_speed(frames[0], v, 0.5)[-1].astype(int).sum()) for v in np.linspace(0.0, 0.5, 41)]
-    assert all(b > a for a, b in zip(lit, lit[1:]))                                  # grows with the speed
-    assert int(stamp_speed(frames[0], 9.0, 0.5)[-1].sum()) == 24 * 255               # clipped at full scale
-    with pytest.raises(ValueError):
-        stamp_speed(frames, np.nan, 0.5)
-    with pytest.raises(ValueError):
-        stamp_speed(np.zeros((4, 4), np.uint8), 0.1, 0.5)

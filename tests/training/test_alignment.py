@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from virl_quad import demo as demo_lib
-from virl_quad import envs, robots
 from virl_quad.reward import RewardConfig, build_reward
 from virl_quad.training.alignment import AlignmentProbe, alignment, record, table
 
@@ -18,7 +17,7 @@ def test_probe_rollouts_are_graded_and_a_model_ranks_them() -> None:
     assert all(r.agent.shape == r.expert.shape and r.agent.shape[1:] == (48, 48) for r in rollouts)
     score = {r.controller: r.score for r in rollouts}
     assert score["tracker, alpha 1"] > score["standing still"] > score["random actions"]   # the set is graded
-    model = build_reward(RewardConfig(), envs.expert_frames(demo, robots.get("pupper"), False), [], 0, "cpu")
+    model = build_reward(RewardConfig(), demo.frames, [], 0, "cpu")
     rho, rewards = alignment(model, rollouts)
     assert -1.0 <= rho <= 1.0 and len(rewards) == len(rollouts)
     assert all(0.0 <= w <= 1.0 for w in rewards)
@@ -32,6 +31,6 @@ def test_a_reward_that_ranks_nothing_aligns_zero() -> None:
     probe.rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=0.5)
     for r in probe.rollouts:                    # every rollout shows the demonstration itself: one reward for all
         r.agent = r.expert = np.asarray(demo.frames[:len(r.agent)])
-    model = build_reward(RewardConfig(), envs.expert_frames(demo, robots.get("pupper"), False), [], 0, "cpu")
+    model = build_reward(RewardConfig(), demo.frames, [], 0, "cpu")
     out = probe.probe(model)
     assert out["reward_alignment"] == 0.0 and out["reward_standing"] == out["reward_best"]

@@ -80,35 +80,36 @@ def test_ground_shift_renders_match_the_demo() -> None:
         validate(TrainArgs(ground_shifts=-1))
 
 
-def test_a_frozen_distance_model_stops_learning_and_remembers_when() -> None:
+def test_a_checkpoint_with_retired_reward_settings_still_loads(tmp_path: Path) -> None:
+    """Checkpoints of older versions hold settings of retired features in the distance model's
+    config (speed_strip, a speed_shift pair weight) and a rollout count: a resumed run's reward
+    source and load_reward_model (the benches') drop them and restore the model's weights."""
     import torch
 
-    rng = np.random.default_rng(1)
-    frames = rng.integers(0, 255, (40, 48, 48), dtype=np.uint8)
-    source = LearnedReward("frame", frames, 2, 1, 0, freeze_after=1)
-    T, N = 12, 2
+    from virl_quad import demo as demo_lib
+    from virl_quad.demo.render import save_npz
+    from virl_quad.reward import RewardConfig
+    from virl_quad.training import checkpoint
 
-    def rollout() -> tuple[torch.Tensor, dict]:
-        for _ in range(T):
-            agent = torch.from_numpy(rng.integers(0, 255, (N, 48, 48), dtype=np.uint8))
-            obs = {"agent_image": agent, "expert_image": torch.from_numpy(frames[:N].copy())}
-            final = {"final_agent_image": agent, "final_expert_image": obs["expert_image"]}
-            source.observe(obs, torch.zeros(N), torch.zeros(N), final)
-        return source.finish()
+    demo = demo_lib.load("trot", "pupper")
+    source = LearnedReward("frame", demo.frames, 2, 1, 0, adversarial_weight=0.1)
+    old = source.state_dict()
+    old["config"] = {**old["config"], "speed_strip": True,
+                     "pair_weights": {**old["config"]["pair_weights"], "speed_shift": 0.25}}
+    old["rollouts"] = 7
+    with pytest.raises(TypeError):
+        RewardConfig(**old["config"])                     # not settings of today's config
 
-    def weights() -> list[torch.Tensor]:
-        return [p.detach().clone() for p in source.model.net.parameters()]
+    def same_weights(model) -> bool:
+        mine = model.net.state_dict()
+        return all(torch.equal(mine[k], v) for k, v in source.model.net.state_dict().items())
 
-    before = weights()
-    _, info = rollout()                                   # rollout 1: the model still learns
-    learned = weights()
-    assert "distance/total" in info and any(not torch.equal(a, b) for a, b in zip(before, learned))
-    assert source.frozen and len(source.model.dataset.sequences()) > 0
-    rewards, info = rollout()                             # rollout 2: frozen, rewards still computed
-    assert "distance/total" not in info and rewards.shape == (T, N) and torch.isfinite(rewards).all()
-    assert all(torch.equal(a, b) for a, b in zip(learned, weights()))
-    again = LearnedReward("frame", frames, 2, 1, 0, freeze_after=1)
-    again.load_state_dict(source.state_dict())            # a resumed run stays frozen
-    assert again.rollouts == 2 and again.frozen
-    with pytest.raises(ValueError, match="freeze"):
-        validate(TrainArgs(reward_freeze_after=-1))
+    resumed = LearnedReward("frame", demo.frames, 2, 1, 5, adversarial_weight=0.1)   # another seed: other weights
+    assert not same_weights(resumed.model)
+    resumed.load_state_dict(old)
+    assert same_weights(resumed.model)
+    checkpoint.save(tmp_path / checkpoint.LATEST, {"actor_state_dict": {}, "iteration": 0,
+                                                   "config": {"robot": "pupper"}, "reward": old})
+    save_npz(demo, tmp_path / "demo.npz")
+    rm, _, _, robot = checkpoint.load_reward_model(tmp_path)
+    assert robot == "pupper" and rm.cfg.pair_weights == {"expert_vs_agent": 0.1} and same_weights(rm)

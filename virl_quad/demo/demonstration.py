@@ -75,23 +75,3 @@ class Demonstration:
     def index(self, step: int) -> int:
         """Frame index of demonstration step ``step`` (wraps when looping, else clamps)."""
         return step % self.num_frames if self.loop else min(max(step, 0), self.num_frames - 1)
-
-    def forward_speed(self, window: int) -> np.ndarray | None:
-        """(T,) m/s: the subject's forward travel over the ``window`` frames up to each frame, per
-        second (as the environment measures the agent's); None when the displacement is unknown.
-        A looping demonstration continues its travel across the wrap; a clip's first frames use
-        the frames they have."""
-        if self.displacement is None:
-            return None
-        x = np.asarray(self.displacement, dtype=np.float64)[:, 0]   # m, forward
-        T, w = len(x), max(int(window), 1)
-        if T < 2:
-            return np.zeros(T)
-        i = np.arange(T)
-        if self.loop:                                                # frames before 0: the previous lap
-            lap = x[-1] - x[0] + (x[-1] - x[-2])                     # m, travel of one pass of the loop
-            back = x[(i - w) % T] - lap * (i < w)
-            return (x - back) * self.fps / w
-        lo = np.maximum(i - w, 0)
-        hi = np.maximum(i, 1)                                        # frame 0: the step to frame 1
-        return (x[hi] - x[lo]) * self.fps / (hi - lo)

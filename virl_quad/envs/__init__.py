@@ -10,7 +10,7 @@ import dataclasses
 import gymnasium as gym
 
 from virl_quad import robots
-from virl_quad.envs.quadruped import EnvConfig, QuadrupedEnv, expert_frames, policy_contract
+from virl_quad.envs.quadruped import EnvConfig, QuadrupedEnv, policy_contract
 
 #: Registered environment builders by name (one today; more tasks plug in here).
 ENVS = {"quadruped": QuadrupedEnv}
@@ -24,6 +24,10 @@ def make(robot: str, *, env: str = "quadruped", render_mode: str | None = None, 
     spec = robots.get(robot)
     if env not in ENVS:
         raise ValueError(f"unknown env {env!r}; choose one of: {', '.join(ENVS)}")
+    # Accepted only until virl_quad/training/alignment.py stops passing the retired option (always
+    # False there); the speed strip itself is gone, so True is refused.
+    if overrides.pop("speed_strip", False):
+        raise ValueError("speed_strip is no longer an env option (the speed strip was retired)")
     names = [f.name for f in dataclasses.fields(EnvConfig)]
     unknown = [k for k in overrides if k not in names]
     if unknown:
@@ -31,4 +35,4 @@ def make(robot: str, *, env: str = "quadruped", render_mode: str | None = None, 
     return ENVS[env](spec, EnvConfig(**overrides), render_mode=render_mode)
 
 
-__all__ = ["make", "EnvConfig", "QuadrupedEnv", "ENVS", "expert_frames", "policy_contract"]
+__all__ = ["make", "EnvConfig", "QuadrupedEnv", "ENVS", "policy_contract"]

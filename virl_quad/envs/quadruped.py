@@ -6,8 +6,6 @@ Observation (``gymnasium.spaces.Dict``):
                   the randomised physical parameters (critic only),
 - ``agent_image`` uint8 (48, 48): the follow camera's view of the agent,
 - ``expert_image`` uint8 (48, 48): with a demonstration, its frame at the env's demonstration clock.
-With ``speed_strip`` both images carry the forward speed in their bottom rows (``sim.strip.stamp_speed``):
-the agent's measured over the last ``SPEED_WINDOW`` steps, the demonstration's from its displacement.
 Action (:class:`virl_quad.policy.ActionMap`, the policy server's too): without a trajectory
 generator 12 joint position offsets from the default pose, ``target = default + action_scale * a``
 (rad); with one (``tg``) 12 residuals on the TG's joint targets and 2 TG modulation entries
@@ -34,7 +32,6 @@ from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
-from virl_quad.sim.strip import SPEED_WINDOW, stamp_speed
 from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
 from virl_quad.sim.world import RobotState, World
 
@@ -62,8 +59,6 @@ class EnvConfig:
     ground: str | None = None              # what the camera sees of the ground, "checker" or "plain";
                                            # None: the demonstration's, else DEFAULT_GROUND
     demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
-    speed_strip: bool = False              # draw the forward speed into both images' bottom rows
-                                           # (needs the demonstration's displacement)
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     terminate_on_fall: bool = True         # end the episode when the robot falls
     oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
@@ -95,20 +90,6 @@ def _ground(cfg: EnvConfig) -> str:
     return cfg.ground or demo_ground or DEFAULT_GROUND
 
 
-def expert_frames(demo: Demonstration, spec: RobotSpec, speed_strip: bool,
-                  frames: np.ndarray | None = None) -> np.ndarray:
-    """``frames`` (default: the demonstration's; e.g. a re-render of the same motion) as the env
-    shows them: as they are, or with the speed strip of ``demo`` (its forward speed from the
-    displacement; ValueError when the displacement is unknown)."""
-    frames = demo.frames if frames is None else frames
-    if not speed_strip:
-        return frames
-    speed = demo.forward_speed(SPEED_WINDOW)
-    if speed is None:
-        raise ValueError(f"the speed strip needs the demonstration's displacement; {demo.source or 'this one'} has none")
-    return stamp_speed(frames, speed, spec.strip_full_speed)
-
-
 def policy_contract(spec: RobotSpec, cfg: EnvConfig, demo_frames: int | None) -> PolicyContract:
     """The policy contract of an env for ``spec`` with ``cfg`` whose demonstration has ``demo_frames``
     frames (None: no demonstration): action scale, clip and rate limit, the TG, and the phase clock
@@ -137,7 +118,6 @@ class QuadrupedEnv(gym.Env):
         if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
             raise ValueError(f"demonstration is at {self.demo.fps:.3f} fps but {spec.name} is controlled at "
                              f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
-        self._expert_frames = None if cfg.demo is None else expert_frames(cfg.demo, spec, cfg.speed_strip)
         self.action_scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
         seconds = cfg.episode_seconds if cfg.episode_seconds is not None else spec.episode_seconds
         self.max_steps = int(round(seconds / spec.control_dt))
@@ -159,8 +139,6 @@ class QuadrupedEnv(gym.Env):
         self.steps = 0
         self.demo_step = 0
         self._history: deque = deque(maxlen=8)
-        self._travel: deque = deque(maxlen=SPEED_WINDOW + 1)   # base (x, y), m, of the last steps
-        self._start_heading = np.array([1.0, 0.0])               # world xy direction of "forward"
         self._next_push = np.inf
         self._state: RobotState | None = None
         self._kin = None
@@ -186,10 +164,7 @@ class QuadrupedEnv(gym.Env):
         self._place_robot()
         self.steps = 0
         self._history.clear()
-        self._travel.clear()
         self._state = self.world.state()
-        yaw = float(self._state.rpy[2])
-        self._start_heading = np.array([np.cos(yaw), np.sin(yaw)])   # unit, world xy
         self.start_yaw = obs_lib.yaw(self._state.base_quat)          # rad, the observation's heading origin
         # the rate limit starts from the pose; the clock where it is at the demonstration's step
         # (the TG's phase at that time of the reference motion it was fitted to; 0 without one)
@@ -198,18 +173,6 @@ class QuadrupedEnv(gym.Env):
         self._remember(self._state)
         self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
-
-    def _forward_speed(self) -> float:
-        """m/s: the base's travel along the episode's first heading over the last SPEED_WINDOW
-        steps (the instantaneous velocity at an episode's first step), as
-        Demonstration.forward_speed measures the demonstration's along its first frame's heading:
-        a robot that turns away shows less speed."""
-        s = self._state
-        heading = self._start_heading
-        if len(self._travel) < 2:
-            return float(s.base_lin_vel[:2] @ heading)
-        moved = self._travel[-1] - self._travel[0]
-        return float(moved @ heading) / ((len(self._travel) - 1) * self.robot.control_dt)
 
     def _place_robot(self) -> None:
         motion = self.demo.motion if self.demo is not None else None
@@ -259,8 +222,6 @@ class QuadrupedEnv(gym.Env):
 
     # -- observation -----------------------------------------------------------------------------
     def _remember(self, s: RobotState) -> None:
-        if self.cfg.speed_strip:                 # only the strip needs the recent travel
-            self._travel.append(np.array(s.base_pos[:2], dtype=np.float64))
         self._history.append((s.time, s.base_quat, s.base_ang_vel_body, s.q, s.dq))
 
     def _delayed(self) -> tuple[np.ndarray, ...]:
@@ -298,16 +259,13 @@ class QuadrupedEnv(gym.Env):
         ]).astype(np.float32)
         out = {"policy": policy, "privileged": privileged, "agent_image": self._agent_image()}
         if self.demo is not None:
-            out["expert_image"] = self._expert_frames[self.demo.index(self.demo_step)]
+            out["expert_image"] = self.demo.frames[self.demo.index(self.demo_step)]
         return out
 
     def _agent_image(self) -> np.ndarray:
         if not self.cfg.render:
             return np.zeros((FRAME_SIZE, FRAME_SIZE), np.uint8)
-        img = self.world.render(cam=self.rand.camera)
-        if self.cfg.speed_strip:
-            img = stamp_speed(img, self._forward_speed(), self.robot.strip_full_speed)
-        return img
+        return self.world.render(cam=self.rand.camera)
 
     def _info(self) -> dict:
         s = self._state

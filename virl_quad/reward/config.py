@@ -14,7 +14,12 @@ VARIANTS: tuple[str, ...] = ("virl", "frame", "sequence", "no_ae", "gaifo")
 POSITIVE_PAIRS: tuple[str, ...] = ("gaussian_noise", "out_of_sync", "duplicate_first",
                                    "duplicate_last", "same_source", "ground_shift")
 NEGATIVE_PAIRS: tuple[str, ...] = ("reversed", "frozen_frame", "shuffled_one", "shuffled_both",
-                                   "expert_vs_agent", "other_clip", "speed_shift")
+                                   "expert_vs_agent", "other_clip")
+#: Settings of retired features (the speed strip and its speed_shift negatives) that configs saved
+#: by older versions hold: reading such a config drops them (:func:`without_retired`), so their
+#: models still load.
+RETIRED_FIELDS: tuple[str, ...] = ("speed_strip",)
+RETIRED_PAIRS: tuple[str, ...] = ("speed_shift",)
 
 
 @dataclass
@@ -81,8 +86,6 @@ class RewardConfig:
                                       # current mean episode length (project choice: CPU cost)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from
                                       # them wrap around their end (else they must fit inside)
-    speed_strip: bool = False         # frames carry the speed strip (virl_quad.sim.strip): enables the
-                                      # speed_shift negatives (project addition)
     warp_min: float = 0.5             # paper: demonstration replay speed range [0.5, 2.0]
     warp_max: float = 2.0             # (sampled log-uniformly, project choice)
 
@@ -145,9 +148,21 @@ class RewardConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "RewardConfig":
-        """Inverse of :meth:`to_dict`; unknown keys raise ValueError."""
+        """Inverse of :meth:`to_dict` (settings of retired features dropped, see
+        :func:`without_retired`); other unknown keys raise ValueError."""
+        d = without_retired(d)
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"unknown RewardConfig fields: {sorted(unknown)}")
         return cls(**d).validate()
+
+
+def without_retired(d: dict[str, Any]) -> dict[str, Any]:
+    """A copy of the saved RewardConfig dict ``d`` without the settings of retired features
+    (:data:`RETIRED_FIELDS`, and :data:`RETIRED_PAIRS` in its ``pair_weights``): how a config
+    saved by an older version compares with, and loads as, today's."""
+    out = {k: v for k, v in d.items() if k not in RETIRED_FIELDS}
+    if isinstance(out.get("pair_weights"), dict):
+        out["pair_weights"] = {k: v for k, v in out["pair_weights"].items() if k not in RETIRED_PAIRS}
+    return out

@@ -13,8 +13,6 @@ from typing import Callable
 
 import numpy as np
 
-from virl_quad.sim import strip
-
 Pair = tuple[np.ndarray, np.ndarray, int]
 
 
@@ -130,19 +128,6 @@ def other_clip(demo: np.ndarray, other: np.ndarray, length: int) -> Pair:
     return demo[:length], other[:length], 0
 
 
-def speed_shift(x: np.ndarray, rng: np.random.Generator, lo: float = 4.0, hi: float = 16.0) -> Pair:
-    """Negative (frames with the speed strip, project addition): the window and a copy whose
-    strip shows another speed, its bar lengthened or shortened by ``lo``..``hi`` px (the same
-    legs travelling at another speed)."""
-    L = _check(x, 2)
-    a = x[:L]
-    end = strip.bar_px(a)
-    delta = rng.uniform(lo, hi) * (1.0 if rng.random() < 0.5 else -1.0)
-    if np.any(np.abs(end + delta) > strip.SIZE // 2):      # no room on that side: go the other way
-        delta = -delta
-    return a, strip.redraw(a, end + delta), 0
-
-
 #: Constructors of one window (x has L + 1 frames), by the name used in RewardConfig.pair_weights.
 SINGLE: dict[str, Callable[[np.ndarray, np.random.Generator], Pair]] = {
     "out_of_sync": out_of_sync,
@@ -152,5 +137,4 @@ SINGLE: dict[str, Callable[[np.ndarray, np.random.Generator], Pair]] = {
     "frozen_frame": frozen_frame,
     "shuffled_one": shuffled_one,
     "shuffled_both": shuffled_both,
-    "speed_shift": speed_shift,
 }

@@ -100,7 +100,6 @@ class PairSampler:
         neg = [n for n in NEGATIVE_PAIRS if w.get(n, 1.0) > 0
                and not (n == "expert_vs_agent" and not have_agent)
                and not (n == "other_clip" and not self.clips)
-               and not (n == "speed_shift" and not self.cfg.speed_strip)
                and not (n == "shuffled_both" and L < 3)]
         if not pos or not neg:
             raise ValueError("pair_weights leave no positive or no negative pair constructor")

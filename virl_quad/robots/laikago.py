@@ -66,7 +66,6 @@ SPEC = RobotSpec(
     camera_yaw=0.0,                                     # deg: side view
     camera_pitch=-15.0,                                 # deg
     episode_seconds=10.0,
-    strip_full_speed=1.6,                               # m/s, twice the built-in trot's speed
     leg=LEG,
     notes="pybullet_data laikago_toes_zup_lores.urdf; limits from laikago_toes_limits.urdf.",
 )

@@ -47,7 +47,6 @@ SPEC = RobotSpec(
     camera_height=0.0,                                  # m
     camera_yaw=0.0,                                     # deg: side view from the right, robot walks left to right
     camera_pitch=-15.0,                                 # deg
-    strip_full_speed=0.5,                               # m/s, twice the built-in trot's speed
     leg=LEG,
     randomization={
         # s, observation delay: the HAL applies the command computed from a period's state in that

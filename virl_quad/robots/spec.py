@@ -122,7 +122,6 @@ class RobotSpec:
                                     # stiff one follows open-loop and is destabilised by it under latency),
     tracker_lead: float = 0.08      # s its feed-forward runs ahead of the clock,
     tracker_noise: float = 0.1      # action units, std of the noise on its executed actions while gathering
-    strip_full_speed: float = 0.5   # m/s drawn as a half-width bar by the speed strip (sim.strip.stamp_speed)
     leg: LegGeometry | None = None  # leg chain for closed-form leg kinematics (m); None: not described
     notes: str = ""
     randomization: dict = field(default_factory=dict)  # this robot's domain-randomisation ranges where they

@@ -39,14 +39,10 @@ class TrainArgs:
     episode_seconds: float = 10.0      # s, training episode time limit
     randomize: bool = True             # domain randomisation during training
     reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
-    reward_warmup: int = 0             # distance-model updates on the demonstration material alone before the first iteration of a new run (0: none, as in the paper; measured once: 2,000 updates left every agent frame at reward 1.000 for the first 125 iterations, a reward with nothing to climb)
-    reward_freeze_after: int = 0       # iterations after which the distance model stops learning and the reward stays fixed (0: it learns all run long, as in the paper; session 3 measured the online model's ranking of behaviour decay late in a run)
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
     ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
-    speed_strip: bool = False          # draw the forward speed (m/s) into the bottom rows of agent and expert frames, as the authors' code joined the base velocity to the image: on the plain ground the frames then show travel too (needs the demonstration's displacement)
-    speed_shift_weight: float = 0.25   # with --speed-strip: sampling weight of negatives whose strip shows another speed (same legs), which teach the distance model to read the strip (1 made it score every agent behaviour ~0 in bench/reward_alignment.py)
     ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
@@ -80,12 +76,6 @@ def validate(args: TrainArgs) -> None:
     for name in ("num_envs", "iterations", "steps_per_env", "save_every", "warm_start_steps"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
-    if args.speed_shift_weight < 0:
-        raise ValueError(f"--speed-shift-weight must be >= 0, got {args.speed_shift_weight}")
-    if args.reward_warmup < 0:
-        raise ValueError(f"--reward-warmup must be >= 0, got {args.reward_warmup}")
-    if args.reward_freeze_after < 0:
-        raise ValueError(f"--reward-freeze-after must be >= 0, got {args.reward_freeze_after}")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
     if args.ground not in GROUNDS:

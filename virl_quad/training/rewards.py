@@ -6,8 +6,7 @@ returns the rollout's rewards [T, N] (``finish``):
 - :class:`LearnedReward`: the VIRL distance or one of its baselines/ablations
   (``virl``, ``frame``, ``sequence``, ``no_ae``, ``gaifo``): stores the rollout's
   agent/expert frames in the distance model's dataset, runs M updates, then
-  recomputes every reward of the rollout with the updated model (after
-  ``freeze_after`` rollouts, if set, the model stops learning: a fixed reward);
+  recomputes every reward of the rollout with the updated model;
 - :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
   pose-imitation reward, the upper bound of the comparison);
 - :class:`SurvivalReward`: 1 per step the robot is up (``prior``: no imitation reward at all,
@@ -23,6 +22,7 @@ import torch
 from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
+from virl_quad.reward.config import without_retired
 
 
 def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -43,17 +43,11 @@ class LearnedReward:
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
                  cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 demo_variants: list[np.ndarray] | None = None, freeze_after: int = 0,
-                 speed_strip: bool = False, speed_shift_weight: float = 1.0) -> None:
+                 demo_variants: list[np.ndarray] | None = None) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
-        if speed_shift_weight != 1.0:
-            weights["speed_shift"] = float(speed_shift_weight)
-        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights,
-                           speed_strip=speed_strip)
+        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device, demo_variants)
         self.updates = updates
-        self.freeze_after = int(freeze_after)   # rollouts; 0: the model learns all run long
-        self.rollouts = 0                       # rollouts finished (saved with the model)
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
         self._agent: list[torch.Tensor] = []
@@ -72,11 +66,8 @@ class LearnedReward:
         agent, expert, dones = torch.stack(self._agent), torch.stack(self._expert), torch.stack(self._dones)
         self._agent, self._expert, self._dones = [], [], []
         t0 = time.perf_counter()
-        info = {}
-        if not self.frozen:
-            self.model.add_rollout(agent, expert, dones)
-            info = {f"distance/{k}": float(v) for k, v in self.model.update(self.updates).items()}
-        self.rollouts += 1
+        self.model.add_rollout(agent, expert, dones)
+        info = {f"distance/{k}": float(v) for k, v in self.model.update(self.updates).items()}
         t1 = time.perf_counter()
         # The rollout starts from the state the last one ended in (computed with the previous
         # weights); envs whose episode ended on the last step start fresh.
@@ -86,29 +77,16 @@ class LearnedReward:
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
 
-    def warm_up(self, updates: int, log=print, every: int = 100) -> None:
-        """Train the distance model for ``updates`` batches on the demonstration material alone
-        (the demonstration, other clips: no agent data yet) before the first rollout, printing
-        the loss every ``every`` updates: its first rewards then already tell motion from
-        stillness and order from disorder, instead of coming from random weights."""
-        for k in range(0, updates, every):
-            info = self.model.update(min(every, updates - k))
-            log(f"distance-model warm-up: {min(k + every, updates):5d}/{updates} updates, "
-                f"loss {info.get('total', float('nan')):.4f}")
-
-    @property
-    def frozen(self) -> bool:
-        """True once the distance model has stopped learning (``freeze_after`` rollouts done)."""
-        return 0 < self.freeze_after <= self.rollouts
-
     def state_dict(self) -> dict:
-        """Distance model and optimiser, and the rollout count (weights-only loadable)."""
-        return {**self.model.state_dict(), "rollouts": self.rollouts}
+        """Distance model and optimiser (weights-only loadable)."""
+        return self.model.state_dict()
 
     def load_state_dict(self, d: dict) -> None:
-        """Restore the distance model, optimiser and rollout count (0 for checkpoints without it)."""
-        d = dict(d)
-        self.rollouts = int(d.pop("rollouts", 0))
+        """Restore the distance model and optimiser. A checkpoint of an older version may hold
+        settings of retired features in the model's config (dropped, see
+        :func:`~virl_quad.reward.config.without_retired`) and a rollout count (ignored)."""
+        if isinstance(d.get("config"), dict):
+            d = {**d, "config": without_retired(d["config"])}
         self.model.load_state_dict(d)
 
 
