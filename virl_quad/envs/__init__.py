@@ -24,10 +24,6 @@ def make(robot: str, *, env: str = "quadruped", render_mode: str | None = None, 
     spec = robots.get(robot)
     if env not in ENVS:
         raise ValueError(f"unknown env {env!r}; choose one of: {', '.join(ENVS)}")
-    # Accepted only until virl_quad/training/alignment.py stops passing the retired option (always
-    # False there); the speed strip itself is gone, so True is refused.
-    if overrides.pop("speed_strip", False):
-        raise ValueError("speed_strip is no longer an env option (the speed strip was retired)")
     names = [f.name for f in dataclasses.fields(EnvConfig)]
     unknown = [k for k in overrides if k not in names]
     if unknown:

@@ -57,14 +57,13 @@ def controllers(robot: str, cycle: float, gait: str = "trot") -> dict[str, Contr
     return out
 
 
-def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, randomize: bool, ground: str,
-            speed_strip: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, randomize: bool,
+            ground: str) -> tuple[np.ndarray, np.ndarray, float]:
     """(agent frames, expert frames, ground-truth total) of one episode of ``act``."""
     from virl_quad import envs
     from virl_quad.demo.score import record_episode, score_trajectory
 
-    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground,
-                    speed_strip=speed_strip)
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
     rng = np.random.default_rng(seed)
     agent, expert = [], []
 
@@ -84,14 +83,14 @@ def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, random
 
 
 def record(robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1), seconds: float = 4.0,
-           randomize: bool = True, ground: str = "checker", speed_strip: bool = False) -> list[GradedRollout]:
+           randomize: bool = True, ground: str = "checker") -> list[GradedRollout]:
     """The probe's rollouts: every controller once per seed (needs ``demo.motion``)."""
     if demo.motion is None:
         raise ValueError("the alignment probe needs a demonstration with a reference motion (the score needs one)")
     out = []
     for name, act in controllers(robot, float(demo.motion.duration), gait).items():
         for seed in seeds:
-            agent, expert, score = rollout(robot, demo, act, seed, seconds, randomize, ground, speed_strip)
+            agent, expert, score = rollout(robot, demo, act, seed, seconds, randomize, ground)
             out.append(GradedRollout(name, seed, agent, expert, score))
     return out
 
@@ -121,9 +120,8 @@ class AlignmentProbe:
     """The probe as training uses it: rollouts recorded at construction, ``probe(model)`` after."""
 
     def __init__(self, robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1),
-                 seconds: float = 4.0, randomize: bool = True, ground: str = "checker",
-                 speed_strip: bool = False) -> None:
-        self.rollouts = record(robot, demo, gait, seeds, seconds, randomize, ground, speed_strip)
+                 seconds: float = 4.0, randomize: bool = True, ground: str = "checker") -> None:
+        self.rollouts = record(robot, demo, gait, seeds, seconds, randomize, ground)
 
     def probe(self, model) -> dict[str, float]:
         """``{"reward_alignment": rho, "reward_best": mean reward of the best-scored controller,

@@ -1,0 +1,328 @@
+"""The gait prior from the video alone: analysis by synthesis.
+
+The trajectory generator (:mod:`virl_quad.policy.tg`) whose kinematic rendering looks most
+like the demonstration video, found without the demonstration's reference motion:
+
+0. **Silhouettes** (:func:`silhouettes`): the flat background (the gray levels that fill the
+   top and bottom rows: sky and ground) is painted white. The follow camera sees the ground
+   scroll by at the robot's speed, a second period (a checker square per 0.5 s at 0.25 m/s)
+   that has nothing to do with the legs; a TG cannot say where along the ground it is.
+1. **Period** (:func:`gait_period`): the lag, within the gait band, at which the video's
+   silhouettes are most alike (self-similarity). Half a trot or pace cycle looks almost
+   like a whole one from the side (near and far legs swap), so the search tries the
+   period found and twice it.
+2. **A distance model** trained on the demonstration's self-supervised pairs alone (the
+   VIRL losses and pair kinds; other clips, when given, as negatives of another class),
+   on silhouettes: no agent data yet.
+3. **Candidates**: TG parameters rendered with no physics by the env's own camera (the
+   base moving forward at the TG's stance speed, at the height where stance feet touch
+   the ground), as silhouettes. Each candidate is compared with the video at its best time
+   shift, on the model's frame encodings (the global phase is unknown: leg FR stays at
+   phase 0 and the shift finds the rest).
+4. **Search**: every phase pattern on a grid of quarter cycles at both periods, then the
+   duty factor of the best patterns, then speed and swing height, then each leg's offset
+   in eighths. The best few are ranked by the full VIRL distance (sequence + frame terms).
+
+:func:`fit_tg_to_video` returns the fitted :class:`~virl_quad.policy.tg.TGParams`, the
+report (period, distance, candidates tried) and the fitted gait's frames aligned with the
+video, for a contact sheet (:func:`save_fit_sheet`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from virl_quad.policy.tg import TGParams, TrajectoryGenerator
+from virl_quad.robots.spec import RobotSpec
+
+GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
+MIN_PERIODICITY = 0.3       # below this the video shows no periodic motion (1: exactly periodic)
+MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) below which a video is still
+SKIP = 10                   # first frames left out of the sequence distance (the LSTM warms up)
+BACKGROUND_SHARE = 0.1      # a gray level filling this share of the top or bottom rows is background
+BORDER_ROWS = 2             # px rows at the top and at the bottom that show only sky and ground
+
+
+@dataclass(frozen=True)
+class VideoFitConfig:
+    """How hard :func:`fit_tg_to_video` searches (defaults: about a minute on 2 cores)."""
+
+    updates: int = 300                                   # distance-model batch updates before the search
+    duties: tuple[float, ...] = (0.4, 0.5, 0.6, 0.75)    # duty factors tried for the best patterns
+    speed_scales: tuple[float, ...] = (0.5, 0.75, 1.0, 1.5)   # x the robot's built-in trot speed
+    swing_scales: tuple[float, ...] = (0.5, 1.0, 1.5)    # x the built-in trot's swing height
+    top_patterns: int = 4                                # patterns carried from the grid to the duty search
+    finalists: int = 4                                   # candidates ranked by the full VIRL distance
+    seed: int = 0                                        # distance model's weights and batches
+
+
+def silhouettes(frames: np.ndarray) -> np.ndarray:
+    """Frames (T, H, W) uint8 with the background's gray levels (those filling at least
+    :data:`BACKGROUND_SHARE` of the top or bottom :data:`BORDER_ROWS` rows over the video)
+    painted white (255); frames with a textured background come back unchanged."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    levels: set[int] = set()
+    for rows in (frames[:, :BORDER_ROWS], frames[:, -BORDER_ROWS:]):
+        counts = np.bincount(rows.reshape(-1), minlength=256)
+        levels.update(int(v) for v in np.flatnonzero(counts >= BACKGROUND_SHARE * rows.size))
+    if not levels:
+        return frames.copy()
+    return np.where(np.isin(frames, sorted(levels)), np.uint8(255), frames)
+
+
+def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
+    """(period in frames, periodicity in [0, 1]) of a video (T, H, W) uint8 at ``fps`` (Hz).
+
+    The period is the lag in :data:`GAIT_BAND` with the smallest mean squared frame difference
+    (the first lag within 10 % of the smallest, so not a multiple), refined to a fraction of a
+    frame by a parabola; periodicity is 1 minus that difference over twice the frames' variance
+    (0: no better than unrelated frames). ValueError for a still or too short video."""
+    x = np.asarray(frames, dtype=np.float32) / 255.0
+    x = x.reshape(len(x), -1)
+    x = x - x.mean(axis=0)
+    lo = max(2, int(math.floor(fps / GAIT_BAND[1])))
+    hi = min(len(x) // 2, int(math.ceil(fps / GAIT_BAND[0])))
+    if hi < lo + 2:
+        raise ValueError(f"the video ({len(x)} frames at {fps:g} fps) is too short to find a gait period: "
+                         f"it needs two cycles of at least {1 / GAIT_BAND[1]:.1f} s")
+    change = float(np.mean((x[1:] - x[:-1]) ** 2))
+    if change < MIN_MOTION:
+        raise ValueError("the video is a still image: no motion to fit a gait to")
+    var = float(np.mean(x ** 2))
+    lags = np.arange(lo, hi + 1)
+    diff = np.array([np.mean((x[k:] - x[:-k]) ** 2) for k in lags])
+    best = float(diff.min())
+    i = int(np.argmax(diff <= best + 0.1 * (np.median(diff) - best)))
+    while i + 1 < len(diff) and diff[i + 1] < diff[i]:          # to the bottom of that dip
+        i += 1
+    while i > 0 and diff[i - 1] < diff[i]:
+        i -= 1
+    period = float(lags[i])
+    if 0 < i < len(diff) - 1:                                    # parabola through the dip
+        a, b, c = diff[i - 1], diff[i], diff[i + 1]
+        den = a - 2 * b + c
+        if den > 0:
+            period += float(0.5 * (a - c) / den)
+    return period, float(max(0.0, 1.0 - diff[i] / (2.0 * var)))
+
+
+class Synthesizer:
+    """Kinematic renders of a TG on one robot with the env's camera and ground (no physics)."""
+
+    def __init__(self, spec: RobotSpec) -> None:
+        from virl_quad.sim.camera import CameraParams
+        from virl_quad.sim.world import World
+
+        self.spec = spec
+        self.cam = CameraParams.from_spec(spec)
+        self.world = World(spec, ground="plain")        # painted out by silhouettes() anyway
+
+    def render(self, params: TGParams, num_frames: int) -> np.ndarray | None:
+        """Silhouettes (num_frames, 48, 48) uint8 of the TG played from phase 0 at the control
+        rate, or None when its feet are out of the robot's reach."""
+        try:
+            tg = TrajectoryGenerator(self.spec, params)
+        except ValueError:
+            return None
+        t = np.arange(num_frames) / self.spec.control_hz                      # s
+        q = self.spec.clip_to_limits(tg.joint_targets((t * params.frequency)[:, None]))
+        speed = params.step_length * params.frequency / params.duty           # m/s, stance feet at rest
+        base_z = self.spec.foot_radius - float(np.mean(tg.stance_z))          # m, stance feet on the ground
+        out = np.empty((num_frames, 48, 48), np.uint8)
+        for i in range(num_frames):
+            self.world.set_pose(np.array([speed * t[i], 0.0, base_z]), np.array([0.0, 0.0, 0.0, 1.0]), q[i])
+            out[i] = self.world.render(cam=self.cam)
+        return silhouettes(out)
+
+    def close(self) -> None:
+        """Release the physics client."""
+        self.world.close()
+
+
+def template(spec: RobotSpec) -> TGParams:
+    """The starting TG: the robot's built-in trot (stance height, swing height, speed)."""
+    from virl_quad.demo.gaits import gait_params
+    from virl_quad.training.prior import gait_tg
+
+    return gait_tg(spec, gait_params(spec.name, "trot"))
+
+
+def candidate(base: TGParams, frequency: float, offsets, duty: float, speed: float, swing: float) -> TGParams:
+    """``base`` at another frequency (Hz), leg offsets, duty, forward speed (m/s) and swing height (m)."""
+    return replace(base, frequency=frequency, offsets=tuple(float(o) % 1.0 for o in offsets), duty=duty,
+                   step_length=speed * duty / frequency, swing_height=swing)
+
+
+def relative_offsets(offsets) -> tuple[float, ...]:
+    """Leg offsets relative to leg FR (cycles in [0, 1)): the phase pattern without its global phase."""
+    o = np.asarray(offsets, dtype=np.float64)
+    return tuple(float(v) for v in np.mod(o - o[0], 1.0))
+
+
+def same_pattern(a, b, tolerance: float = 0.125) -> bool:
+    """Whether two leg-offset sets are the same phase pattern (each leg within ``tolerance`` cycles
+    relative to leg FR)."""
+    d = np.mod(np.asarray(relative_offsets(a)) - np.asarray(relative_offsets(b)) + 0.5, 1.0) - 0.5
+    return bool(np.all(np.abs(d) <= tolerance + 1e-9))
+
+
+class _Scorer:
+    """Distance of candidate renders to the video under one distance model, with the time shift."""
+
+    def __init__(self, model, video: np.ndarray, synth: Synthesizer, shifts: int) -> None:
+        self.model, self.video, self.synth, self.shifts = model, video, synth, shifts
+        self.net = model.net
+        self.video_e = self._encode(video)
+        self.cache: dict[TGParams, tuple[float, int, np.ndarray | None]] = {}
+
+    def _encode(self, frames: np.ndarray) -> torch.Tensor:
+        with torch.no_grad():
+            return self.net.encode_frames(torch.from_numpy(frames).float() / 255.0)[0]
+
+    def frame_cost(self, params: TGParams) -> tuple[float, int, np.ndarray | None]:
+        """(mean frame-encoding distance at the best shift, that shift, the render) of a candidate."""
+        if params in self.cache:
+            return self.cache[params]
+        n = len(self.video)
+        frames = self.synth.render(params, n + self.shifts)
+        if frames is None:
+            self.cache[params] = (math.inf, 0, None)
+            return self.cache[params]
+        d = torch.cdist(self.video_e, self._encode(frames))                     # [T, T + S]
+        rows = torch.arange(n)
+        costs = torch.stack([d[rows, rows + s].mean() for s in range(self.shifts)])
+        s = int(torch.argmin(costs))
+        self.cache[params] = (float(costs[s]), s, frames)
+        return self.cache[params]
+
+    def virl_distance(self, params: TGParams) -> float:
+        """Mean VIRL distance (sequence + frame terms, frames SKIP..) at the candidate's best shift."""
+        cost, s, frames = self.frame_cost(params)
+        if frames is None:
+            return math.inf
+        n = len(self.video)
+        e = torch.from_numpy(self.video[:, None]).float() / 255.0
+        a = torch.from_numpy(frames[s:s + n, None]).float() / 255.0
+        d = self.model.distance(e, a)[:, 0]
+        return float(d[SKIP:].mean() if n > SKIP else d.mean())
+
+
+def train_model(frames: np.ndarray, clips: list[np.ndarray], loop: bool, cfg: VideoFitConfig, log=None):
+    """A VIRL distance model trained on the demonstration's self-supervised pairs (clips as negatives)."""
+    from virl_quad.reward.config import RewardConfig
+    from virl_quad.reward.reward import build_reward
+
+    model = build_reward(RewardConfig(variant="virl", clips_cyclic=loop), frames, clips, cfg.seed, "cpu")
+    with torch.random.fork_rng(devices=[]):        # dropout seeded: the same fit every time
+        torch.manual_seed(cfg.seed)
+        _train(model, cfg.updates, log)
+    return model
+
+
+def _train(model, updates: int, log) -> None:
+    for k in range(0, updates, 100):
+        info = model.update(min(100, updates - k))
+        if log:
+            log(f"  prior fit: distance model update {min(k + 100, updates)}/{updates}, "
+                f"loss {info.get('total', float('nan')):.3f}")
+
+
+def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, cfg: VideoFitConfig) -> list[TGParams]:
+    """The search of the module doc; returns the finalists, best frame cost first."""
+    cost = lambda p: scorer.frame_cost(p)[0]
+    speed0 = base.step_length * base.frequency / base.duty                         # m/s
+    grid = [(0.0,) + o for o in itertools.product((0.0, 0.25, 0.5, 0.75), repeat=3)]
+    pool = [candidate(base, fps / p, o, base.duty, speed0, base.swing_height) for p in periods for o in grid]
+    pool.sort(key=cost)
+    best_patterns = pool[:cfg.top_patterns]
+    pool = [replace(p, duty=d, step_length=speed0 * d / p.frequency) for p in best_patterns for d in cfg.duties]
+    pool = sorted(pool, key=cost)
+    best = pool[0]
+    sized = [candidate(best, best.frequency, best.offsets, best.duty, speed0 * v, base.swing_height * w)
+             for v in cfg.speed_scales for w in cfg.swing_scales]
+    best = min(sized, key=cost)
+    for _ in range(2):                                                             # each leg's offset in eighths
+        for leg in (1, 2, 3):
+            trial = []
+            for step in (-0.125, 0.0, 0.125):
+                o = list(best.offsets)
+                o[leg] = (o[leg] + step) % 1.0
+                trial.append(replace(best, offsets=tuple(o)))
+            best = min(trial, key=cost)
+    ranked = sorted(set(pool + sized + [best]), key=cost)
+    return ranked[:cfg.finalists]
+
+
+def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, clips: list[np.ndarray] | None = None,
+                    loop: bool = True, cfg: VideoFitConfig = VideoFitConfig(),
+                    log: Callable[[str], None] | None = None) -> tuple[TGParams, dict, np.ndarray]:
+    """Fit TG parameters to a demonstration video (T, 48, 48) uint8 at ``fps`` (Hz), the robot's
+    control rate, seen by the env's camera; ``clips``: other motions' videos (negatives).
+
+    Returns ``(params, report, fitted silhouettes (T, 48, 48) aligned with the video's)``; the report
+    holds ``period_frames``, ``periodicity``, ``distance`` (mean VIRL distance of the fit),
+    ``frame_distance``, ``candidates`` (renders made) and ``seconds``. ValueError (one line) for a
+    still video, one with no periodic motion, or one too short for two gait cycles."""
+    t0 = time.time()
+    frames = silhouettes(frames)
+    if abs(fps - spec.control_hz) > 1e-6:
+        raise ValueError(f"the video runs at {fps:g} fps, not {spec.name}'s control rate {spec.control_hz:g} Hz")
+    period, periodicity = gait_period(frames, fps)
+    if periodicity < MIN_PERIODICITY:
+        raise ValueError(f"the video shows no periodic motion (periodicity {periodicity:.2f} < {MIN_PERIODICITY}): "
+                         "no gait to fit")
+    periods = [period] + ([2 * period] if fps / (2 * period) >= GAIT_BAND[0] else [])
+    if log:
+        log(f"  prior fit: period {period:.2f} frames ({fps / period:.2f} Hz), periodicity {periodicity:.2f}; "
+            f"trying {', '.join(f'{fps / p:.2f}' for p in periods)} Hz")
+    model = train_model(frames, [silhouettes(c) for c in clips or []], loop, cfg, log)
+    torch_threads = torch.get_num_threads()
+    torch.set_num_threads(os.cpu_count() or 1)
+    synth = Synthesizer(spec)
+    try:
+        scorer = _Scorer(model, frames, synth, int(math.ceil(max(periods))))
+        finalists = _search(scorer, template(spec), periods, fps, cfg)
+        dist = {p: scorer.virl_distance(p) for p in finalists}
+        best = min(finalists, key=lambda p: dist[p])
+        cost, shift, render = scorer.frame_cost(best)
+    finally:
+        synth.close()
+        torch.set_num_threads(torch_threads)
+    report = {"period_frames": period, "periodicity": periodicity, "distance": dist[best], "frame_distance": cost,
+              "candidates": len(scorer.cache), "seconds": time.time() - t0,
+              "finalists": [{"offsets": list(relative_offsets(p.offsets)), "frequency_hz": p.frequency, "duty": p.duty,
+                             "step_length_m": p.step_length, "swing_height_m": p.swing_height,
+                             "frame_distance": scorer.frame_cost(p)[0], "distance": dist[p]} for p in finalists]}
+    return best, report, render[shift:shift + len(frames)]
+
+
+def describe(params: TGParams, report: dict) -> str:
+    """One line: the fitted TG and how close its rendering is to the video."""
+    return (f"fitted to the video: {params.frequency:.2f} Hz, offsets (FR, FL, RR, RL) "
+            f"{[round(o, 3) for o in relative_offsets(params.offsets)]}, duty {params.duty:.2f}, step "
+            f"{params.step_length * 100:.1f} cm, swing {params.swing_height * 100:.1f} cm; VIRL distance "
+            f"{report['distance']:.3f} ({report['candidates']} candidates, {report['seconds']:.0f} s)")
+
+
+def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike) -> Path:
+    """A PNG contact sheet of video | fitted gait, frame by frame, side by side (16 frames)."""
+    import cv2
+
+    from virl_quad.demo.sheet import contact_sheet
+
+    pairs = np.concatenate([np.asarray(video, np.uint8), np.full((len(video), 48, 2), 255, np.uint8),
+                            np.asarray(fitted, np.uint8)], axis=2)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), contact_sheet(pairs, columns=4, max_frames=16)):
+        raise ValueError(f"cannot write {path}")
+    return path
