@@ -137,23 +137,42 @@ def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
     return out
 
 
-def _action_options(args: TrainArgs, demo, resume_data: dict | None) -> dict:
+def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Path) -> dict:
     """The env options that define the policy's actions: a resumed run's own (its checkpoint's
-    contract), else the robot's defaults with ``--tg``'s trajectory generator (fitted to the
-    demonstration's reference motion, else the built-in gait of its name)."""
+    contract), else the robot's defaults with ``--tg``'s trajectory generator (``--prior-from``:
+    fitted to the demonstration video, or to its reference motion)."""
     if resume_data is not None:
         return checkpoint.contract_of(resume_data, args.robot).env_overrides()
     if not args.tg:
         return {}
     from virl_quad import robots
-    from virl_quad.training.prior import tg_for_demo
 
+    spec = robots.get(args.robot)
     try:
-        tg, report = tg_for_demo(demo, robots.get(args.robot), args.demo)
+        if args.prior_from == "video":
+            tg, report = _prior_from_video(demo, spec, run_dir)
+        else:
+            from virl_quad.training.prior import tg_for_demo
+
+            tg, report = tg_for_demo(demo, spec, args.demo)
     except ValueError as e:
         raise UserError(str(e)) from None
     print(f"trajectory generator: {report}", flush=True)
     return {"tg": tg}
+
+
+def _prior_from_video(demo, spec, run_dir: Path):
+    """The TG fitted to the demonstration's frames; writes prior_fit.json and prior_fit.png
+    (video | fitted gait) into the run folder."""
+    from virl_quad.training.video_prior import describe, fit_tg_to_video, save_fit_sheet, silhouettes
+
+    print("fitting the gait prior to the demonstration video ...", flush=True)
+    tg, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec,
+                                         log=lambda line: print(line, flush=True))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    sheet = save_fit_sheet(silhouettes(demo.frames), fitted, run_dir / "prior_fit.png")
+    (run_dir / "prior_fit.json").write_text(json.dumps({"tg": tg.to_dict(), **report}, indent=2) + "\n")
+    return tg, f"{describe(tg, report)}; video | fit: {sheet}"
 
 
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
@@ -168,7 +187,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         raise UserError("--reward oracle needs a demonstration with a reference motion (a gait or motion file)")
     it0 = int(resume_data["iteration"]) if resume_data else 0
     workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
-    action_options = _action_options(args, demo, resume_data)
+    action_options = _action_options(args, demo, resume_data, run_dir)
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
@@ -318,7 +337,7 @@ def _interrupt(signum, frame) -> None:
 
 
 def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
-    """Final evaluation, report.json and side-by-side video."""
+    """Final evaluation, report.json, the exported policy (policy.pt) and the side-by-side video."""
     from virl_quad.training.report import side_by_side_video, write_report
     from virl_quad.training.runner import actor_policy, eval_summary
 
@@ -337,6 +356,10 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),
                             "iteration": runner.current_learning_iteration}, runner.standing)
     log(f"report: {run_dir / 'report.json'} ({summary}; survival {final.get('survival_fraction', float('nan')):.2f})")
+    from virl_quad.export import export
+
+    log(f"policy: {export(run_dir, run_dir / 'policy.pt')} (TorchScript with its contract; serve it with "
+        f"python -m virl_quad.deploy.serve --policy {run_dir / 'policy.pt'})")
     if args.video:
         out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground, **actions)
         log(f"video: {out}")

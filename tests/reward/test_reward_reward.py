@@ -181,8 +181,8 @@ def test_gaifo_reward_is_discriminator_output(small_cfg, demo, other, agent_epis
     with torch.no_grad():
         x0 = torch.from_numpy(agent[0]).float() / 255
         x1 = torch.from_numpy(agent[1]).float() / 255
-        d0 = torch.sigmoid(rm.net(x0, x0))                        # first frame of an episode pairs with itself
-        d1 = torch.sigmoid(rm.net(x0, x1))
+        d0 = torch.sigmoid(rm.reward_net(x0, x0))                        # first frame of an episode pairs with itself
+        d1 = torch.sigmoid(rm.reward_net(x0, x1))
     assert torch.allclose(r0, d0, atol=1e-6) and torch.allclose(r1, d1, atol=1e-6)
     with pytest.raises(ValueError, match="gaifo needs"):
         build_reward(RewardConfig(variant="gaifo"), demo).update(1)

@@ -84,6 +84,11 @@ class RewardConfig:
     window_min: int = 8               # frames, shortest training window (project choice)
     window_max: int = 64              # frames, longest window; EESP caps it further at the
                                       # current mean episode length (project choice: CPU cost)
+    paint_background: bool = True     # every frame the model sees has the demonstration's flat
+                                      # background (the gray levels of its border rows: sky and
+                                      # ground) painted one gray: the ground's scroll and pattern phase
+                                      # differ whenever agent and demonstration stand at different
+                                      # places, and say nothing about the legs (project choice)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from
                                       # them wrap around their end (else they must fit inside)
     warp_min: float = 0.5             # paper: demonstration replay speed range [0.5, 2.0]
@@ -92,6 +97,10 @@ class RewardConfig:
     # -- optimiser (released code: Adam 1e-3, clip 1.0) -------------------------------------
     lr: float = 1e-3                  # Adam learning rate
     grad_clip: float = 1.0            # max global gradient L2 norm
+    ema: float = 0.99                 # rewards come from a slowly moving copy of the model, moved
+                                      # this much less than all the way to the trained weights after
+                                      # every update (0: from the trained model itself, as in the
+                                      # paper); smooths the reward a policy climbs (project choice)
 
     # -- reward -----------------------------------------------------------------------------
     w_d: float = -5.0                 # paper: r = exp(w_d * d^2)
@@ -121,6 +130,8 @@ class RewardConfig:
             raise ValueError(f"reward_floor must be in (0, 1), got {self.reward_floor}")
         if self.margin <= 0 or self.lr <= 0 or self.grad_clip <= 0:
             raise ValueError("margin, lr and grad_clip must be positive")
+        if not 0.0 <= self.ema < 1.0:
+            raise ValueError(f"ema must be in [0, 1), got {self.ema}")
         if self.ae_frames < 0:
             raise ValueError(f"ae_frames must be >= 0, got {self.ae_frames}")
         if self.max_bytes <= 0 or self.max_episode_frames < 2:
@@ -161,8 +172,11 @@ class RewardConfig:
 def without_retired(d: dict[str, Any]) -> dict[str, Any]:
     """A copy of the saved RewardConfig dict ``d`` without the settings of retired features
     (:data:`RETIRED_FIELDS`, and :data:`RETIRED_PAIRS` in its ``pair_weights``): how a config
-    saved by an older version compares with, and loads as, today's."""
+    saved by an older version compares with, and loads as, today's (settings added since take
+    the value that reproduces the old behaviour)."""
     out = {k: v for k, v in d.items() if k not in RETIRED_FIELDS}
+    out.setdefault("paint_background", False)        # saved before backgrounds were painted
+    out.setdefault("ema", 0.0)                       # saved before rewards came from a slow copy
     if isinstance(out.get("pair_weights"), dict):
         out["pair_weights"] = {k: v for k, v in out["pair_weights"].items() if k not in RETIRED_PAIRS}
     return out

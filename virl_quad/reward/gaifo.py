@@ -97,7 +97,7 @@ class GaifoReward(RewardModel):
         before = torch.cat([state.prev[None], agent[:-1]], dim=0)        # frame t-1 (state for t = 0)
         prev = torch.where(resets[..., None, None], agent, before)      # a new episode pairs (o_0, o_0)
         p, c = prev.reshape(-1, FRAME, FRAME), agent.reshape(-1, FRAME, FRAME)
-        logits = torch.cat([self.net(p[i:i + _CHUNK], c[i:i + _CHUNK]) for i in range(0, p.shape[0], _CHUNK)])
+        logits = torch.cat([self.reward_net(p[i:i + _CHUNK], c[i:i + _CHUNK]) for i in range(0, p.shape[0], _CHUNK)])
         d = (F.softplus(-logits) / -self.cfg.w_d).sqrt().reshape(T, n)
         new = StreamState(state.h, state.c, agent[-1].clone(), torch.zeros_like(state.fresh))
         return d, new

@@ -23,6 +23,7 @@ with reset masks m0, dones[0], ..., dones[T-2].
 from __future__ import annotations
 
 import contextlib
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +33,7 @@ from torch import nn
 
 from virl_quad.reward.config import RewardConfig
 from virl_quad.reward.dataset import EpisodeStore
-from virl_quad.reward.frames import FRAME, to_float, to_mask, to_uint8
+from virl_quad.reward.frames import FRAME, background_levels, paint, paint_float, to_float, to_mask, to_uint8
 from virl_quad.reward.losses import total_loss
 from virl_quad.reward.model import DistanceModel
 from virl_quad.reward.sampler import PairSampler
@@ -86,11 +87,15 @@ class RewardModel:
     def __init__(self, cfg: RewardConfig, demo: np.ndarray, clips: list[np.ndarray], seed: int,
                  device: str | torch.device = "cpu") -> None:
         self.cfg, self.seed, self.device = cfg, int(seed), torch.device(device)
-        self.demo, self.clips = demo, clips
+        self._raw = (demo, clips)                    # as given: what a checkpoint saves
+        levels = background_levels(demo) if cfg.paint_background else np.zeros(0, np.int64)
+        self.levels = torch.from_numpy(levels).to(self.device)
+        self.demo, self.clips = paint(demo, levels), [paint(c, levels) for c in clips]   # what the model sees
         self.dataset = EpisodeStore(cfg.max_bytes, cfg.max_episode_frames)
         with torch.random.fork_rng(devices=[]):  # seeded weight init, caller's global RNG untouched
             torch.manual_seed(self.seed)
             self.net = self._build_net().to(self.device).eval()
+        self.reward_net = copy.deepcopy(self.net) if cfg.ema > 0 else self.net   # what rewards come from
         self.trainer = Trainer(self.net, self._loss, cfg.lr, cfg.grad_clip, self.seed)
 
     # -- to be provided by a variant ---------------------------------------------------------
@@ -112,13 +117,23 @@ class RewardModel:
         raise NotImplementedError
 
     # -- data and training -------------------------------------------------------------------
+    def _paint(self, frames, name: str, axes: str) -> np.ndarray:
+        """Checked uint8 frames with the background painted (``cfg.paint_background``)."""
+        return paint(to_uint8(frames, name, axes), self.levels.cpu().numpy())
+
+    def _float(self, frames, name: str, axes: str) -> torch.Tensor:
+        """Checked float frames in [0, 1] on the model's device, background painted."""
+        return paint_float(to_float(frames, name, axes, self.device), self.levels)
+
     def add_episode(self, agent_frames, expert_frames) -> None:
         """Store one agent episode with its matching expert frames, each [T, 48, 48] uint8."""
-        self.dataset.add_episode(agent_frames, expert_frames)
+        self.dataset.add_episode(self._paint(agent_frames, "agent_frames", "T"),
+                                 self._paint(expert_frames, "expert_frames", "T"))
 
     def add_rollout(self, agent_frames, expert_frames, dones) -> int:
         """Store a rollout [T, N, 48, 48] split into episodes by ``dones`` [T, N]; see EpisodeStore.add_rollout."""
-        return self.dataset.add_rollout(agent_frames, expert_frames, dones)
+        return self.dataset.add_rollout(self._paint(agent_frames, "agent_frames", "TN"),
+                                        self._paint(expert_frames, "expert_frames", "TN"), dones)
 
     def update(self, num_updates: int) -> dict[str, float]:
         """Run ``num_updates`` batch updates of the distance model; return means over them for logging.
@@ -127,7 +142,13 @@ class RewardModel:
         ``d_expert``, ``d_agent`` for gaifo), ``total``, ``grad_norm`` (before clipping) and,
         for the VIRL variants, ``window`` (frames per training sequence). Empty for 0 updates.
         """
-        return self.trainer.update(num_updates)
+        logs = self.trainer.update(num_updates)
+        if self.reward_net is not self.net:
+            keep = self.cfg.ema ** num_updates          # one EMA step per update, applied at once
+            with torch.no_grad():
+                for slow, fast in zip(self.reward_net.parameters(), self.net.parameters()):
+                    slow.mul_(keep).add_(fast, alpha=1.0 - keep)
+        return logs
 
     # -- rewards -----------------------------------------------------------------------------
     def stream_state(self, num_envs: int) -> StreamState:
@@ -155,8 +176,8 @@ class RewardModel:
         ``reset_mask`` [N] bool: these envs start a new episode with this frame.
         Returns (r float32 [N] in (0, 1] on the model's device, the next state).
         """
-        a = to_float(agent, "agent", "N", self.device)
-        e = to_float(expert, "expert", "N", self.device)
+        a = self._float(agent, "agent", "N")
+        e = self._float(expert, "expert", "N")
         n = a.shape[0]
         if e.shape[0] != n:
             raise ValueError(f"agent has {n} frames, expert {e.shape[0]}")
@@ -164,7 +185,7 @@ class RewardModel:
         resets = state.fresh.clone()
         if reset_mask is not None:
             resets |= to_mask(reset_mask, "reset_mask", (n,), self.device)
-        with eval_mode(self.net):
+        with eval_mode(self.reward_net):
             d, state = self._rollout(a[None], e[None], resets[None], state)
         return self._reward(d[0]), state
 
@@ -176,8 +197,8 @@ class RewardModel:
         ``start_reset`` [N] that step's reset mask. With ``return_state`` also
         returns the state after the last frame (under the current weights).
         """
-        a = to_float(agent, "agent", "TN", self.device)
-        e = to_float(expert, "expert", "TN", self.device)
+        a = self._float(agent, "agent", "TN")
+        e = self._float(expert, "expert", "TN")
         if a.shape != e.shape:
             raise ValueError(f"agent {list(a.shape)} and expert {list(e.shape)} frames differ in shape")
         T, n = a.shape[:2]
@@ -187,19 +208,19 @@ class RewardModel:
         if start_reset is not None:
             first |= to_mask(start_reset, "start_reset", (n,), self.device)
         resets = torch.cat([first[None], d_mask[:-1]], dim=0)
-        with eval_mode(self.net):
+        with eval_mode(self.reward_net):
             d, state = self._rollout(a, e, resets, start_state)
         r = self._reward(d)
         return (r, state) if return_state else r
 
     def distance(self, expert, agent) -> torch.Tensor:
         """d_t [T, N] between expert and agent sequences [T, N, 48, 48] streamed from a fresh state."""
-        a = to_float(agent, "agent", "TN", self.device)
-        e = to_float(expert, "expert", "TN", self.device)
+        a = self._float(agent, "agent", "TN")
+        e = self._float(expert, "expert", "TN")
         if a.shape != e.shape:
             raise ValueError(f"agent {list(a.shape)} and expert {list(e.shape)} frames differ in shape")
         resets = torch.zeros(a.shape[:2], dtype=torch.bool, device=self.device)
-        with eval_mode(self.net):
+        with eval_mode(self.reward_net):
             return self._rollout(a, e, resets, self.stream_state(a.shape[1]))[0]
 
     # -- checkpoints -------------------------------------------------------------------------
@@ -209,9 +230,10 @@ class RewardModel:
             "format": FORMAT,
             "config": self.cfg.to_dict(),
             "seed": self.seed,
-            "demo": torch.from_numpy(self.demo.copy()),
-            "clips": [torch.from_numpy(c.copy()) for c in self.clips],
+            "demo": torch.from_numpy(self._raw[0].copy()),
+            "clips": [torch.from_numpy(c.copy()) for c in self._raw[1]],
             "net": {k: v.detach().cpu().clone() for k, v in self.net.state_dict().items()},
+            "reward_net": {k: v.detach().cpu().clone() for k, v in self.reward_net.state_dict().items()},
             "trainer": self.trainer.state_dict(),
         }
 
@@ -227,6 +249,8 @@ class RewardModel:
         if saved != mine:
             raise ValueError("state was saved with a different RewardConfig")
         self.net.load_state_dict(d["net"])
+        if self.reward_net is not self.net:
+            self.reward_net.load_state_dict(d.get("reward_net", d["net"]))
         self.trainer.load_state_dict(d["trainer"])
 
     def save(self, path: str | Path) -> None:
@@ -273,7 +297,7 @@ class VirlReward(RewardModel):
     def _encode(self, x: torch.Tensor) -> torch.Tensor:
         lead = x.shape[:-2]
         flat = x.reshape(-1, FRAME, FRAME)
-        mu = torch.cat([self.net.encode_frames(flat[i:i + _CHUNK])[0] for i in range(0, flat.shape[0], _CHUNK)])
+        mu = torch.cat([self.reward_net.encode_frames(flat[i:i + _CHUNK])[0] for i in range(0, flat.shape[0], _CHUNK)])
         return mu.reshape(*lead, -1)
 
     def _rollout(self, agent, expert, resets, state):
@@ -282,7 +306,7 @@ class VirlReward(RewardModel):
         d_frame = (e[:, :n] - e[:, n:]).norm(dim=-1)
         if not cfg.uses_lstm:
             return d_frame, StreamState(state.h, state.c, state.prev, torch.zeros_like(state.fresh))
-        lstm, head = self.net.omega.lstm, self.net.omega.head
+        lstm, head = self.reward_net.omega.lstm, self.reward_net.omega.head
         h = state.h.reshape(1, 2 * n, -1)
         c = state.c.reshape(1, 2 * n, -1)
         outs = []

@@ -14,6 +14,7 @@ from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
 #: rewards that need no frames: the env's ground-truth score (oracle) or survival alone (prior)
 FRAMELESS_REWARDS = ("oracle", "prior")
+PRIOR_SOURCES = ("video", "motion")
 
 
 @dataclass
@@ -26,7 +27,7 @@ class TrainArgs:
     num_envs: int = 16                 # parallel simulated robots
     num_workers: int = -1              # env worker processes (-1: one per CPU core)
     iterations: int = 1000             # PPO iterations to run (an upper bound when --minutes is given)
-    minutes: float = 0.0               # wall-clock budget in minutes (0: no budget, run all iterations)
+    minutes: float = 18.0              # wall-clock budget in minutes of the warm start and PPO (0: none, run all iterations); the default keeps the whole main job (prior fit, probe, evaluations, video) within 20 minutes on 2 cores
     steps_per_env: int = 64            # env steps per env per iteration (rollout length)
     seed: int = 0                      # seed of envs, networks and sampling
     device: str = "cpu"                # torch device of PPO and the distance model (cpu or cuda)
@@ -43,7 +44,7 @@ class TrainArgs:
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
     ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
-    ground_shifts: int = 7             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
+    ground_shifts: int = 0             # re-renders of the demonstration with the robot shifted along the checker ground, as positive pairs that teach the distance model to ignore the pattern's phase (needs a reference motion; 0: off; none on the plain ground)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
     critic_learning_rate: float = 1e-3  # fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl
@@ -56,7 +57,8 @@ class TrainArgs:
     critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
     symmetry: bool = False             # rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg: the mirror shifts the gait clock by the TG's leg offsets)
     alignment_probe: bool = True       # with a learned reward: at every evaluation, the rank correlation of the reward with the ground-truth score over a fixed graded set of rollouts (tracker variants, standing, other gaits, random; recorded once at the start), logged beside the score
-    tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation) fitted to the demonstration's reference motion, else the built-in gait of its name; off: joint offsets from the default pose
+    prior_from: str = field(default="video", metadata={"choices": PRIOR_SOURCES})  # where the trajectory generator's parameters come from: video (fitted to the demonstration's frames by rendering candidate gaits and keeping the closest, the video alone) or motion (least squares on the demonstration's reference motion, else the built-in gait of its name)
+    tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation; its parameters: see --prior-from); off: joint offsets from the default pose
 
 
 def validate(args: TrainArgs) -> None:
@@ -78,6 +80,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
+    if args.prior_from not in PRIOR_SOURCES:
+        raise ValueError(f"unknown --prior-from {args.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.ground not in GROUNDS:
         raise ValueError(f"unknown --ground {args.ground!r}; choose one of: {', '.join(GROUNDS)}")
     if args.ground_shifts < 0:

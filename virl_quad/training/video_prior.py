@@ -11,21 +11,20 @@ like the demonstration video, found without the demonstration's reference motion
    silhouettes are most alike (self-similarity). Half a trot or pace cycle looks almost
    like a whole one from the side (near and far legs swap), so the search tries the
    period found and twice it.
-2. **A distance model** trained on the demonstration's self-supervised pairs alone (the
-   VIRL losses and pair kinds; other clips, when given, as negatives of another class),
-   on silhouettes: no agent data yet.
-3. **Candidates**: TG parameters rendered with no physics by the env's own camera (the
-   base moving forward at the TG's stance speed, at the height where stance feet touch
-   the ground), as silhouettes. Each candidate is compared with the video at its best time
-   shift, on the model's frame encodings (the global phase is unknown: leg FR stays at
-   phase 0 and the shift finds the rest).
-4. **Search**: every phase pattern on a grid of quarter cycles at both periods, then the
+2. **Candidates**: TG parameters rendered with no physics by the env's own camera (the base
+   moving forward at the TG's stance speed, at the height where stance feet touch the
+   ground), as silhouettes, compared with the video's at the best time shift (the global
+   phase is unknown: leg FR stays at phase 0 and the shift finds the rest) by the mean
+   absolute gray difference. That distance is graded, a near miss nearer than a far one,
+   which a contrastive distance model is not: it pushes every pair that differs beyond its
+   margin, so near misses and far ones come out alike (docs/experiments.md).
+3. **Search**: every phase pattern on a grid of quarter cycles at both periods, then the
    duty factor of the best patterns, then speed and swing height, then each leg's offset
-   in eighths. The best few are ranked by the full VIRL distance (sequence + frame terms).
+   in eighths.
 
 :func:`fit_tg_to_video` returns the fitted :class:`~virl_quad.policy.tg.TGParams`, the
-report (period, distance, candidates tried) and the fitted gait's frames aligned with the
-video, for a contact sheet (:func:`save_fit_sheet`).
+report (period, distance, candidates tried) and the fitted gait's silhouettes aligned with the
+video's, for a contact sheet (:func:`save_fit_sheet`).
 """
 
 from __future__ import annotations
@@ -47,36 +46,26 @@ from virl_quad.robots.spec import RobotSpec
 GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
 MIN_PERIODICITY = 0.3       # below this the video shows no periodic motion (1: exactly periodic)
 MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) below which a video is still
-SKIP = 10                   # first frames left out of the sequence distance (the LSTM warms up)
-BACKGROUND_SHARE = 0.1      # a gray level filling this share of the top or bottom rows is background
-BORDER_ROWS = 2             # px rows at the top and at the bottom that show only sky and ground
 
 
 @dataclass(frozen=True)
 class VideoFitConfig:
     """How hard :func:`fit_tg_to_video` searches (defaults: about a minute on 2 cores)."""
 
-    updates: int = 300                                   # distance-model batch updates before the search
     duties: tuple[float, ...] = (0.4, 0.5, 0.6, 0.75)    # duty factors tried for the best patterns
     speed_scales: tuple[float, ...] = (0.5, 0.75, 1.0, 1.5)   # x the robot's built-in trot speed
     swing_scales: tuple[float, ...] = (0.5, 1.0, 1.5)    # x the built-in trot's swing height
     top_patterns: int = 4                                # patterns carried from the grid to the duty search
-    finalists: int = 4                                   # candidates ranked by the full VIRL distance
-    seed: int = 0                                        # distance model's weights and batches
+    finalists: int = 4                                   # best candidates listed in the report
 
 
 def silhouettes(frames: np.ndarray) -> np.ndarray:
-    """Frames (T, H, W) uint8 with the background's gray levels (those filling at least
-    :data:`BACKGROUND_SHARE` of the top or bottom :data:`BORDER_ROWS` rows over the video)
-    painted white (255); frames with a textured background come back unchanged."""
-    frames = np.asarray(frames, dtype=np.uint8)
-    levels: set[int] = set()
-    for rows in (frames[:, :BORDER_ROWS], frames[:, -BORDER_ROWS:]):
-        counts = np.bincount(rows.reshape(-1), minlength=256)
-        levels.update(int(v) for v in np.flatnonzero(counts >= BACKGROUND_SHARE * rows.size))
-    if not levels:
-        return frames.copy()
-    return np.where(np.isin(frames, sorted(levels)), np.uint8(255), frames)
+    """Frames (T, H, W) uint8 with their own flat background painted white
+    (:func:`virl_quad.reward.frames.background_levels`): the same for a video and a render on
+    another ground. A textured background stays."""
+    from virl_quad.reward.frames import background_levels, paint
+
+    return paint(frames, background_levels(frames), 255)
 
 
 def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
@@ -176,69 +165,33 @@ def same_pattern(a, b, tolerance: float = 0.125) -> bool:
 
 
 class _Scorer:
-    """Distance of candidate renders to the video under one distance model, with the time shift."""
+    """Distance of candidate renders to the video's silhouettes: the mean absolute difference
+    (gray levels / 255) at the best time shift."""
 
-    def __init__(self, model, video: np.ndarray, synth: Synthesizer, shifts: int) -> None:
-        self.model, self.video, self.synth, self.shifts = model, video, synth, shifts
-        self.net = model.net
-        self.video_e = self._encode(video)
+    def __init__(self, video: np.ndarray, synth: Synthesizer, shifts: int) -> None:
+        self.video, self.synth, self.shifts = video, synth, shifts
+        self.video_f = torch.from_numpy(video).float() / 255.0
         self.cache: dict[TGParams, tuple[float, int, np.ndarray | None]] = {}
 
-    def _encode(self, frames: np.ndarray) -> torch.Tensor:
-        with torch.no_grad():
-            return self.net.encode_frames(torch.from_numpy(frames).float() / 255.0)[0]
-
-    def frame_cost(self, params: TGParams) -> tuple[float, int, np.ndarray | None]:
-        """(mean frame-encoding distance at the best shift, that shift, the render) of a candidate."""
-        if params in self.cache:
-            return self.cache[params]
-        n = len(self.video)
-        frames = self.synth.render(params, n + self.shifts)
-        if frames is None:
-            self.cache[params] = (math.inf, 0, None)
-            return self.cache[params]
-        d = torch.cdist(self.video_e, self._encode(frames))                     # [T, T + S]
-        rows = torch.arange(n)
-        costs = torch.stack([d[rows, rows + s].mean() for s in range(self.shifts)])
-        s = int(torch.argmin(costs))
-        self.cache[params] = (float(costs[s]), s, frames)
+    def cost(self, params: TGParams) -> tuple[float, int, np.ndarray | None]:
+        """(distance at the best shift, that shift in frames, the render) of a candidate; inf
+        for one out of reach."""
+        if params not in self.cache:
+            n = len(self.video)
+            frames = self.synth.render(params, n + self.shifts)
+            if frames is None:
+                self.cache[params] = (math.inf, 0, None)
+            else:
+                f = torch.from_numpy(frames).float() / 255.0
+                costs = torch.stack([(self.video_f - f[s:s + n]).abs().mean() for s in range(self.shifts)])
+                s = int(torch.argmin(costs))
+                self.cache[params] = (float(costs[s]), s, frames)
         return self.cache[params]
-
-    def virl_distance(self, params: TGParams) -> float:
-        """Mean VIRL distance (sequence + frame terms, frames SKIP..) at the candidate's best shift."""
-        cost, s, frames = self.frame_cost(params)
-        if frames is None:
-            return math.inf
-        n = len(self.video)
-        e = torch.from_numpy(self.video[:, None]).float() / 255.0
-        a = torch.from_numpy(frames[s:s + n, None]).float() / 255.0
-        d = self.model.distance(e, a)[:, 0]
-        return float(d[SKIP:].mean() if n > SKIP else d.mean())
-
-
-def train_model(frames: np.ndarray, clips: list[np.ndarray], loop: bool, cfg: VideoFitConfig, log=None):
-    """A VIRL distance model trained on the demonstration's self-supervised pairs (clips as negatives)."""
-    from virl_quad.reward.config import RewardConfig
-    from virl_quad.reward.reward import build_reward
-
-    model = build_reward(RewardConfig(variant="virl", clips_cyclic=loop), frames, clips, cfg.seed, "cpu")
-    with torch.random.fork_rng(devices=[]):        # dropout seeded: the same fit every time
-        torch.manual_seed(cfg.seed)
-        _train(model, cfg.updates, log)
-    return model
-
-
-def _train(model, updates: int, log) -> None:
-    for k in range(0, updates, 100):
-        info = model.update(min(100, updates - k))
-        if log:
-            log(f"  prior fit: distance model update {min(k + 100, updates)}/{updates}, "
-                f"loss {info.get('total', float('nan')):.3f}")
 
 
 def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, cfg: VideoFitConfig) -> list[TGParams]:
     """The search of the module doc; returns the finalists, best frame cost first."""
-    cost = lambda p: scorer.frame_cost(p)[0]
+    cost = lambda p: scorer.cost(p)[0]
     speed0 = base.step_length * base.frequency / base.duty                         # m/s
     grid = [(0.0,) + o for o in itertools.product((0.0, 0.25, 0.5, 0.75), repeat=3)]
     pool = [candidate(base, fps / p, o, base.duty, speed0, base.swing_height) for p in periods for o in grid]
@@ -262,16 +215,15 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
     return ranked[:cfg.finalists]
 
 
-def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, clips: list[np.ndarray] | None = None,
-                    loop: bool = True, cfg: VideoFitConfig = VideoFitConfig(),
+def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoFitConfig = VideoFitConfig(),
                     log: Callable[[str], None] | None = None) -> tuple[TGParams, dict, np.ndarray]:
     """Fit TG parameters to a demonstration video (T, 48, 48) uint8 at ``fps`` (Hz), the robot's
-    control rate, seen by the env's camera; ``clips``: other motions' videos (negatives).
+    control rate, seen by the env's camera.
 
     Returns ``(params, report, fitted silhouettes (T, 48, 48) aligned with the video's)``; the report
-    holds ``period_frames``, ``periodicity``, ``distance`` (mean VIRL distance of the fit),
-    ``frame_distance``, ``candidates`` (renders made) and ``seconds``. ValueError (one line) for a
-    still video, one with no periodic motion, or one too short for two gait cycles."""
+    holds ``period_frames``, ``periodicity``, ``distance`` (of the fit, gray levels / 255),
+    ``candidates`` (renders made), ``seconds`` and ``finalists`` (the best candidates). ValueError
+    (one line) for a still video, one with no periodic motion, or one too short for two cycles."""
     t0 = time.time()
     frames = silhouettes(frames)
     if abs(fps - spec.control_hz) > 1e-6:
@@ -284,24 +236,19 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, clips: list
     if log:
         log(f"  prior fit: period {period:.2f} frames ({fps / period:.2f} Hz), periodicity {periodicity:.2f}; "
             f"trying {', '.join(f'{fps / p:.2f}' for p in periods)} Hz")
-    model = train_model(frames, [silhouettes(c) for c in clips or []], loop, cfg, log)
-    torch_threads = torch.get_num_threads()
-    torch.set_num_threads(os.cpu_count() or 1)
     synth = Synthesizer(spec)
     try:
-        scorer = _Scorer(model, frames, synth, int(math.ceil(max(periods))))
+        scorer = _Scorer(frames, synth, int(math.ceil(max(periods))))
         finalists = _search(scorer, template(spec), periods, fps, cfg)
-        dist = {p: scorer.virl_distance(p) for p in finalists}
-        best = min(finalists, key=lambda p: dist[p])
-        cost, shift, render = scorer.frame_cost(best)
     finally:
         synth.close()
-        torch.set_num_threads(torch_threads)
-    report = {"period_frames": period, "periodicity": periodicity, "distance": dist[best], "frame_distance": cost,
+    best = finalists[0]
+    distance, shift, render = scorer.cost(best)
+    report = {"period_frames": period, "periodicity": periodicity, "distance": distance,
               "candidates": len(scorer.cache), "seconds": time.time() - t0,
               "finalists": [{"offsets": list(relative_offsets(p.offsets)), "frequency_hz": p.frequency, "duty": p.duty,
                              "step_length_m": p.step_length, "swing_height_m": p.swing_height,
-                             "frame_distance": scorer.frame_cost(p)[0], "distance": dist[p]} for p in finalists]}
+                             "distance": scorer.cost(p)[0]} for p in finalists]}
     return best, report, render[shift:shift + len(frames)]
 
 
@@ -309,8 +256,9 @@ def describe(params: TGParams, report: dict) -> str:
     """One line: the fitted TG and how close its rendering is to the video."""
     return (f"fitted to the video: {params.frequency:.2f} Hz, offsets (FR, FL, RR, RL) "
             f"{[round(o, 3) for o in relative_offsets(params.offsets)]}, duty {params.duty:.2f}, step "
-            f"{params.step_length * 100:.1f} cm, swing {params.swing_height * 100:.1f} cm; VIRL distance "
-            f"{report['distance']:.3f} ({report['candidates']} candidates, {report['seconds']:.0f} s)")
+            f"{params.step_length * 100:.1f} cm, swing {params.swing_height * 100:.1f} cm; silhouettes "
+            f"{report['distance'] * 255:.2f} gray levels apart ({report['candidates']} candidates, "
+            f"{report['seconds']:.0f} s)")
 
 
 def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike) -> Path:

@@ -1,0 +1,77 @@
+"""The gait prior fitted to the video alone (analysis by synthesis), on real renders."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from virl_quad import demo as demo_lib
+from virl_quad import robots
+from virl_quad.demo.gaits import PHASE_OFFSETS
+from virl_quad.training.video_prior import (fit_tg_to_video, gait_period, relative_offsets, same_pattern,
+                                            silhouettes)
+
+PUPPER = robots.get("pupper")
+
+
+@pytest.mark.parametrize("gait, frames", [("trot", 25), ("bound", 20), ("walk", 40)])
+def test_the_period_of_a_rendered_gait(gait: str, frames: int) -> None:
+    video = demo_lib.load(gait, "pupper").frames
+    period, periodicity = gait_period(silhouettes(video), PUPPER.control_hz)
+    assert period == pytest.approx(frames, abs=0.3) and periodicity > 0.9
+
+
+def test_silhouettes_paint_sky_and_ground_and_keep_the_robot() -> None:
+    video = demo_lib.load("trot", "pupper").frames
+    out = silhouettes(video)
+    assert (out[:, -2:] == 255).all() and (out[:, :2] == 255).all()
+    robot = ~np.isin(video, [89, 140, 255])                  # checker squares and sky
+    assert robot.any() and (out[robot] == video[robot]).all()
+
+
+@pytest.mark.parametrize("gait", ["trot", "pace"])
+def test_a_rendered_gait_fits_its_own_phase_pattern(gait: str) -> None:
+    demo = demo_lib.load(gait, "pupper")
+    params, report, fitted = fit_tg_to_video(demo.frames, demo.fps, PUPPER)
+    assert same_pattern(params.offsets, PHASE_OFFSETS[gait]), relative_offsets(params.offsets)
+    others = [g for g in ("trot", "pace", "bound") if g != gait]
+    assert not any(same_pattern(params.offsets, PHASE_OFFSETS[g]) for g in others)
+    assert params.frequency == pytest.approx(2.0, rel=0.02)
+    assert fitted.shape == demo.frames.shape and report["distance"] < 2 / 255
+    assert report["finalists"][0]["distance"] == report["distance"]
+
+
+def test_same_pattern_ignores_the_global_phase() -> None:
+    assert same_pattern((0.25, 0.75, 0.75, 0.25), PHASE_OFFSETS["trot"])
+    assert not same_pattern(PHASE_OFFSETS["pace"], PHASE_OFFSETS["trot"])
+
+
+def test_videos_with_no_gait_are_refused() -> None:
+    still = np.repeat(demo_lib.load("trot", "pupper").frames[:1], 100, axis=0)
+    with pytest.raises(ValueError, match="still image"):
+        fit_tg_to_video(still, PUPPER.control_hz, PUPPER)
+    noise = np.random.default_rng(0).integers(0, 256, (100, 48, 48), dtype=np.uint8)
+    with pytest.raises(ValueError, match="no periodic motion"):
+        fit_tg_to_video(noise, PUPPER.control_hz, PUPPER)
+    with pytest.raises(ValueError, match="too short"):
+        fit_tg_to_video(demo_lib.load("trot", "pupper").frames[:12], PUPPER.control_hz, PUPPER)
+
+
+@pytest.mark.parametrize("kind, message", [("still", "still image"), ("noise", "no periodic motion")])
+def test_train_on_a_video_with_no_gait_is_one_error_line(kind: str, message: str, tmp_path: Path) -> None:
+    from virl_quad.demo.render import write_mp4
+
+    trot = demo_lib.load("trot", "pupper").frames
+    frames = (np.repeat(trot[:1], 100, axis=0) if kind == "still"
+              else np.random.default_rng(0).integers(0, 256, (100, 48, 48), dtype=np.uint8))
+    video = write_mp4(np.repeat(np.repeat(frames, 5, axis=1), 5, axis=2), PUPPER.control_hz, tmp_path / f"{kind}.mp4")
+    p = subprocess.run([sys.executable, "-m", "virl_quad.train", "--demo", str(video), "--iterations", "1",
+                        "--run-dir", str(tmp_path / "run"), "--num-envs", "2", "--num-workers", "1"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 2, p.stderr[-2000:]
+    assert p.stderr.startswith("error:") and message in p.stderr and "Traceback" not in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
