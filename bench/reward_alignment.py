@@ -16,11 +16,11 @@ correlation between reward and score over all rollouts: near 1, following the re
 climbs the score; near 0, the reward gives a policy nothing to climb. A fast check of
 a reward design, without a training run.
 
-``--fresh``: instead of a run's model, a new one (``--variant``, ``--adversarial-weight``,
-``--ground-shifts`` as in training) is trained here for ``--updates`` batches on the
-built-in demonstration, the other built-in gaits as multi-task clips, and, as agent
-data, rollouts of the same controllers from other seeds (a diverse stand-in for a
-policy's rollouts); the alignment is then measured on the usual seeds.
+``--fresh``: instead of a run's model, a new one (``--variant``, ``--adversarial-weight``
+as in training) is trained here for ``--updates`` batches on the built-in demonstration,
+the other built-in gaits as multi-task clips, and, as agent data, rollouts of the same
+controllers from other seeds (a diverse stand-in for a policy's rollouts); the alignment
+is then measured on the usual seeds.
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from pathlib import Path
 import torch
 
 from virl_quad import demo as demo_lib
-from virl_quad.demo.render import ground_shifted
 from virl_quad.reward.config import RewardConfig
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 from virl_quad.reward.reward import build_reward
@@ -48,14 +47,13 @@ def fresh_model(a: argparse.Namespace):
     clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
     cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
-    shifts = ground_shifted(demo, robot, a.ground_shifts, a.ground)
-    rm = build_reward(cfg, demo.frames, clips, 0, "cpu", shifts)
+    rm = build_reward(cfg, demo.frames, clips, 0, "cpu")
     for name, act in controllers(robot, float(demo.motion.duration), gait).items():
         for seed in range(1000, 1000 + a.train_seeds):
             agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)
             rm.add_episode(agent, expert)
     print(f"training a fresh {a.variant} model on the {a.ground} ground: {a.updates} updates, adversarial "
-          f"weight {a.adversarial_weight:g}, {len(shifts)} ground shifts", file=sys.stderr, flush=True)
+          f"weight {a.adversarial_weight:g}", file=sys.stderr, flush=True)
     for k in range(0, a.updates, 100):
         info = rm.update(min(100, a.updates - k))
         print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
@@ -76,7 +74,6 @@ def main() -> int:
     p.add_argument("--adversarial-weight", type=float, default=1.0, help="--fresh: expert-vs-agent pair weight")
     p.add_argument("--ground", choices=GROUNDS, help="ground of the renders (default: the run's demonstration's, "
                    "else checker; give it for a run whose demonstration does not record it)")
-    p.add_argument("--ground-shifts", type=int, default=7, help="--fresh: ground-shift re-renders (checker only)")
     p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
     p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
     p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")

@@ -123,20 +123,6 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
     return clips
 
 
-def _ground_shifts(args: TrainArgs, demo) -> list[np.ndarray]:
-    """Ground-shift positives for the distance model (see render.ground_shifted)."""
-    from virl_quad.demo.render import ground_shifted
-
-    out = ground_shifted(demo, args.robot, args.ground_shifts, args.ground)
-    if out:
-        print(f"ground-shift positives: the demonstration re-rendered at {len(out)} offsets along the ground",
-              flush=True)
-    elif args.ground_shifts > 0:
-        print("no ground-shift positives: they need a reference motion, the checker ground and re-renders "
-              "as long as the demonstration", flush=True)
-    return out
-
-
 def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Path) -> dict:
     """The env options that define the policy's actions: a resumed run's own (its checkpoint's
     contract), else the robot's defaults with ``--tg``'s trajectory generator (``--prior-from``:
@@ -202,8 +188,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         source = LearnedReward(args.reward, demo.frames, args.num_envs, args.reward_updates, args.seed,
                                args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
                                other_clips=_other_clips(args, run_dir),
-                               adversarial_weight=args.adversarial_weight,
-                               demo_variants=_ground_shifts(args, demo))
+                               adversarial_weight=args.adversarial_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),

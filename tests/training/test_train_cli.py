@@ -31,7 +31,8 @@ EXTRA = {"pupper": ["--ground", "plain"],
          "laikago": ["--alignment-probe", "--eval-every", "2"]}
 
 #: Options of retired features, with their old defaults, as checkpoints of older versions hold them.
-RETIRED = {"speed_strip": False, "speed_shift_weight": 0.25, "reward_warmup": 0, "reward_freeze_after": 0}
+RETIRED = {"speed_strip": False, "speed_shift_weight": 0.25, "reward_warmup": 0, "reward_freeze_after": 0,
+           "ground_shifts": 7}
 
 
 @pytest.mark.parametrize("robot", ["pupper", "laikago"])
@@ -61,7 +62,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     # (in the training options and the distance model's config): they are dropped
     data["config"].update(RETIRED)
     data["reward"]["config"].update(speed_strip=False, pair_weights={**data["reward"]["config"]["pair_weights"],
-                                                                     "speed_shift": 0.25})
+                                                                     "speed_shift": 0.25, "ground_shift": 1.0})
     data["reward"]["rollouts"] = 2
     checkpoint.save(run_dir / checkpoint.LATEST, data)
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
@@ -70,7 +71,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     data = checkpoint.load(run_dir)
     assert data["iteration"] == 3 and data["config"]["ground"] == ("plain" if robot == "pupper" else "checker")
     assert not set(RETIRED) & set(data["config"]) and "speed_strip" not in data["reward"]["config"]
-    assert "speed_shift" not in data["reward"]["config"]["pair_weights"]
+    assert not {"speed_shift", "ground_shift"} & set(data["reward"]["config"]["pair_weights"])
     assert not all(torch.equal(net2[k], v) for k, v in data["reward"]["net"].items())   # it learns all run long
     # export, load, act
     out = tmp_path / "policy.pt"

@@ -161,28 +161,6 @@ def render_demonstration(motion: Motion, robot: str, source: str = "", min_secon
                          displacement=root_displacement(motion, n, fps))
 
 
-def ground_shifted(demo: Demonstration, robot: str, n: int, ground: str = DEFAULT_GROUND) -> list[np.ndarray]:
-    """The demonstration's frames re-rendered with the robot k/(n+1) of the ground pattern's
-    period (two checker squares) further along, k = 1..n: the same motion where the follow
-    camera sees the ground at another phase (positives for a distance model). ``ground``: the
-    one the demonstration was rendered on. Empty on the plain ground (no pattern: the re-renders
-    would equal the demonstration), without a motion, or when a re-render comes out at another
-    length."""
-    from virl_quad.sim.ground import CHECKER_SQUARE
-
-    if n <= 0 or demo.motion is None or ground != "checker":
-        return []
-    period, m = 2 * CHECKER_SQUARE, demo.motion   # m
-    out = []
-    for k in range(1, n + 1):
-        shifted = dataclasses.replace(m, root_pos=m.root_pos + np.array([k * period / (n + 1), 0.0, 0.0]))
-        frames = render_demonstration(shifted, robot, ground=ground).frames
-        if frames.shape != demo.frames.shape:
-            return []
-        out.append(frames)
-    return out
-
-
 def save_npz(demo: Demonstration, path: str | os.PathLike) -> Path:
     """Save a demonstration as a compressed ``.npz`` (atomic write); returns the path."""
     path = Path(path)

@@ -72,14 +72,6 @@ def same_source(x1: np.ndarray, x2: np.ndarray, length: int) -> Pair:
     return x1[:length], x2[:length], 1
 
 
-def ground_shift(x: np.ndarray, shifted: np.ndarray, length: int) -> Pair:
-    """Positive: the same demonstration window rendered with the robot further along the ground
-    (a nuisance: the follow camera sees the ground pattern at another phase), project addition."""
-    if x.shape != shifted.shape or x.shape[0] < length:
-        raise ValueError(f"ground_shift needs two windows of the same shape and >= {length} frames")
-    return x[:length], shifted[:length], 1
-
-
 # -- negatives ------------------------------------------------------------------------------
 def reversed_order(x: np.ndarray, rng: np.random.Generator) -> Pair:
     """Negative: the window and the same frames played backwards."""

@@ -274,10 +274,10 @@ class VirlReward(RewardModel):
 
     net: DistanceModel
 
-    def __init__(self, *args, variants: list[np.ndarray] | None = None, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.variants = list(variants or [])
-        self.sampler = PairSampler(self.cfg, self.demo, self.clips, self.dataset, self.variants)
+    def __init__(self, cfg: RewardConfig, demo: np.ndarray, clips: list[np.ndarray], seed: int,
+                 device: str | torch.device = "cpu") -> None:
+        super().__init__(cfg, demo, clips, seed, device)
+        self.sampler = PairSampler(self.cfg, self.demo, self.clips, self.dataset)
 
     def _build_net(self) -> nn.Module:
         return DistanceModel(self.cfg)
@@ -322,14 +322,12 @@ class VirlReward(RewardModel):
 
 
 def build_reward(cfg: RewardConfig, demo_frames, other_clips: list | None = None, seed: int = 0,
-                 device: str | torch.device = "cpu", demo_variants: list | None = None) -> RewardModel:
+                 device: str | torch.device = "cpu") -> RewardModel:
     """Build the reward model of ``cfg.variant`` for a demonstration [T, 48, 48] (uint8 or float in [0, 1]).
 
     ``other_clips``: optional clips [T_k, 48, 48] of other motions (extra negatives
-    and anchor material: the paper's multi-task data). ``demo_variants``: optional
-    re-renders of the demonstration with the robot shifted along the ground (same shape),
-    positives that teach the model to ignore the ground pattern's phase. ``seed`` fixes weights,
-    batch drawing, dropout and noise.
+    and anchor material: the paper's multi-task data). ``seed`` fixes weights, batch drawing,
+    dropout and noise.
     """
     cfg = RewardConfig.from_dict(cfg.to_dict())  # a validated private copy
     demo = to_uint8(demo_frames, "demo_frames", "T")
@@ -340,5 +338,4 @@ def build_reward(cfg: RewardConfig, demo_frames, other_clips: list | None = None
         from virl_quad.reward.gaifo import GaifoReward
 
         return GaifoReward(cfg, demo, clips, seed, device)
-    variants = [to_uint8(v, f"demo_variants[{i}]", "T") for i, v in enumerate(demo_variants or [])]
-    return VirlReward(cfg, demo, clips, seed, device, variants=variants)
+    return VirlReward(cfg, demo, clips, seed, device)

@@ -33,14 +33,8 @@ class PairSampler:
     """Builds batches of labelled pairs from unlabelled demonstration, clips and agent episodes."""
 
     def __init__(self, cfg: RewardConfig, demo: np.ndarray, clips: list[np.ndarray],
-                 dataset: EpisodeStore, variants: list[np.ndarray] | None = None) -> None:
-        """``variants``: the demonstration re-rendered with the robot shifted along the ground
-        (same frame count), material of the ``ground_shift`` positives; none: no such pairs."""
+                 dataset: EpisodeStore) -> None:
         self.cfg, self.demo, self.clips, self.dataset = cfg, demo, list(clips), dataset
-        self.variants = list(variants or [])
-        for v in self.variants:
-            if v.shape != demo.shape:
-                raise ValueError(f"demonstration variant of shape {v.shape} differs from the demonstration's {demo.shape}")
         self._seqs: list[tuple[np.ndarray, np.ndarray]] = []
         off = cfg.same_source_max_offset
         shortest = min(c.shape[0] for c in [demo] + self.clips)
@@ -96,7 +90,7 @@ class PairSampler:
     def available(self, L: int, have_agent: bool) -> tuple[list[str], list[str]]:
         """Names of the positive and negative constructors usable for windows of L frames."""
         w = self.cfg.pair_weights
-        pos = [n for n in POSITIVE_PAIRS if w.get(n, 1.0) > 0 and not (n == "ground_shift" and not self.variants)]
+        pos = [n for n in POSITIVE_PAIRS if w.get(n, 1.0) > 0]
         neg = [n for n in NEGATIVE_PAIRS if w.get(n, 1.0) > 0
                and not (n == "expert_vs_agent" and not have_agent)
                and not (n == "other_clip" and not self.clips)
@@ -117,13 +111,6 @@ class PairSampler:
             return pairs.SINGLE[name](self._anchor(rng, eligible, L + 1), rng)
         if name == "same_source":
             return self._same_source(rng, eligible, L)
-        if name == "ground_shift":
-            if not self.variants:
-                raise ValueError("ground_shift pairs need demonstration variants")
-            other = self.variants[int(rng.integers(len(self.variants)))]
-            both = self._warped(rng, np.concatenate([self.demo, other], axis=2), L)   # one warp for both
-            w = self.demo.shape[2]
-            return pairs.ground_shift(both[..., :w], both[..., w:], L)
         if name == "expert_vs_agent":
             agent, expert, i = self._agent_window(rng, eligible, L)
             return pairs.expert_vs_agent(expert[i:i + L].astype(np.float32) * _SCALE,
