@@ -192,7 +192,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
-                        evaluate=lambda policy: _evaluate(args, demo, policy, actions),
+                        evaluate=(lambda policy: _evaluate(args, demo, policy, actions))
+                        if demo.motion is not None else None,   # a video alone: no ground truth to score
                         device=args.device)
     if not args.device.startswith("cuda"):
         runner.alg.learn_threads = os.cpu_count() or 1   # every core while the env workers wait
@@ -200,7 +201,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
 
 
 def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
-    """Train (or resume), then write report.json and the side-by-side video."""
+    """Train (or resume), then write report.json, the exported policy and the side-by-side video."""
+    t_start = time.time()                          # --minutes counts from here: prior fit and warm start included
     args, run_dir, data = _resolve(args, explicit)
     validate(args)
     if args.device.startswith("cuda") and not torch.cuda.is_available():
@@ -231,7 +233,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         _attach_alignment_probe(args, demo, runner, log)
         if data is None:
             _warm_start(args, demo, runner, log)
-        runner.train(args.iterations, args.minutes, args.save_every, args.eval_every, log=log)
+        left = max(args.minutes - (time.time() - t_start) / 60.0, 1e-6) if args.minutes else 0.0   # min
+        runner.train(args.iterations, left, args.save_every, args.eval_every, log=log)
     finally:
         env.close()
     finish(args, run_dir, demo, runner, log)
@@ -326,10 +329,14 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     from virl_quad.training.report import side_by_side_video, write_report
     from virl_quad.training.runner import actor_policy, eval_summary
 
-    log("final evaluation ...")
     policy = actor_policy(runner.alg.get_policy().eval())
     actions = runner.env.contract.env_overrides()          # the run's own action facts (TG included)
-    final = _evaluate(args, demo, policy, actions)
+    if demo.motion is None:
+        log("the demonstration is a video alone: no reference motion, so no ground-truth evaluation")
+        final = {}
+    else:
+        log("final evaluation ...")
+        final = _evaluate(args, demo, policy, actions)
     report = {"config": to_dict(args), "iterations": runner.current_learning_iteration,
               "env_steps": runner.env_steps, "wall_time_s": runner.wall_time, "evaluation": final,
               "standing": runner.standing}
@@ -338,9 +345,12 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
         report["reward_alignment"] = {**runner.alignment_probe.probe(model),
                                       "curve": _alignment_curve(run_dir / "evaluations.jsonl")}
     write_report(run_dir / "report.json", report)
-    summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),
-                            "iteration": runner.current_learning_iteration}, runner.standing)
-    log(f"report: {run_dir / 'report.json'} ({summary}; survival {final.get('survival_fraction', float('nan')):.2f})")
+    if final:
+        summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),
+                                "iteration": runner.current_learning_iteration}, runner.standing)
+        log(f"report: {run_dir / 'report.json'} ({summary}; survival {final.get('survival_fraction', float('nan')):.2f})")
+    else:
+        log(f"report: {run_dir / 'report.json'}")
     from virl_quad.export import export
 
     log(f"policy: {export(run_dir, run_dir / 'policy.pt')} (TorchScript with its contract; serve it with "

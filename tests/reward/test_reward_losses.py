@@ -101,7 +101,8 @@ def test_vaei_subset_is_unbiased_in_expectation():
 
 def test_overfit_one_fixed_batch(demo, other, agent_episode):
     """Training on one fixed real batch drives the total loss down at least 10x."""
-    cfg = RewardConfig(batch_pairs=8, window_min=8, window_max=8, ae_frames=0, dropout=0.0)
+    cfg = RewardConfig(batch_pairs=8, window_min=8, window_max=8, ae_frames=0, dropout=0.0,
+                       paint_background=False)       # synthetic clips: the blobs on their dark ground as they are
     rm = build_reward(cfg, demo, [other], seed=0)
     for s in range(3):
         rm.add_episode(*agent_episode(s))

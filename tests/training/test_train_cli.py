@@ -94,7 +94,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
 
 
 def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
-    """--tg: the policy is a residual on the trajectory generator fitted to the demonstration; the
+    """--tg: the policy is a residual on the trajectory generator fitted to the demonstration video; the
     run, its resume, its export and the policy server all use that TG (14 actions)."""
     from virl_quad import robots
     from virl_quad.demo.gaits import gait_params
@@ -106,7 +106,8 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     p = run("virl_quad.train", "--robot", "pupper", "--tg", "--reward", "oracle", "--iterations", "1",
             "--run-dir", str(run_dir), *TINY)
     assert p.returncode == 0, p.stderr[-2000:]
-    assert "trajectory generator: fitted to the reference motion" in p.stdout, p.stdout[-2000:]
+    assert "trajectory generator: fitted to the video" in p.stdout, p.stdout[-2000:]
+    assert (run_dir / "prior_fit.png").is_file() and json.loads((run_dir / "prior_fit.json").read_text())["tg"]
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2")
     assert p.returncode == 0 and "resumed at iteration 1" in p.stdout, p.stderr[-2000:]
     out = tmp_path / "tg.pt"

@@ -87,7 +87,7 @@ class RewardConfig:
                                       # current mean episode length (project choice: CPU cost)
     paint_background: bool = True     # every frame the model sees has the demonstration's flat
                                       # background (the gray levels of its border rows: sky and
-                                      # ground) painted one gray: the ground's scroll and pattern phase
+                                      # ground) painted white: the ground's scroll and pattern phase
                                       # differ whenever agent and demonstration stand at different
                                       # places, and say nothing about the legs (project choice)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from

@@ -27,7 +27,7 @@ class TrainArgs:
     num_envs: int = 16                 # parallel simulated robots
     num_workers: int = -1              # env worker processes (-1: one per CPU core)
     iterations: int = 1000             # PPO iterations to run (an upper bound when --minutes is given)
-    minutes: float = 18.0              # wall-clock budget in minutes of the warm start and PPO (0: none, run all iterations); the default keeps the whole main job (prior fit, probe, evaluations, video) within 20 minutes on 2 cores
+    minutes: float = 18.0              # wall-clock budget in minutes from the start of the command to the end of training (prior fit, warm start and PPO; 0: none, run all iterations); the final evaluation, export and video follow, so the default main job takes about 20 minutes on 2 cores
     steps_per_env: int = 64            # env steps per env per iteration (rollout length)
     seed: int = 0                      # seed of envs, networks and sampling
     device: str = "cpu"                # torch device of PPO and the distance model (cpu or cuda)

@@ -52,8 +52,9 @@ MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) be
 class VideoFitConfig:
     """How hard :func:`fit_tg_to_video` searches (defaults: about a minute on 2 cores)."""
 
-    duties: tuple[float, ...] = (0.4, 0.5, 0.6, 0.75)    # duty factors tried for the best patterns
-    speed_scales: tuple[float, ...] = (0.5, 0.75, 1.0, 1.5)   # x the robot's built-in trot speed
+    grid_duties: tuple[float, ...] = (0.3, 0.6)          # duty factors of the phase-pattern grid
+    duties: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75)   # duty factors tried for the best patterns
+    speed_scales: tuple[float, ...] = (0.5, 0.75, 1.0, 1.5, 2.0, 2.5)   # x the robot's built-in trot speed
     swing_scales: tuple[float, ...] = (0.5, 1.0, 1.5)    # x the built-in trot's swing height
     top_patterns: int = 4                                # patterns carried from the grid to the duty search
     finalists: int = 4                                   # best candidates listed in the report
@@ -65,7 +66,7 @@ def silhouettes(frames: np.ndarray) -> np.ndarray:
     another ground. A textured background stays."""
     from virl_quad.reward.frames import background_levels, paint
 
-    return paint(frames, background_levels(frames), 255)
+    return paint(frames, background_levels(frames))
 
 
 def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
@@ -194,7 +195,8 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
     cost = lambda p: scorer.cost(p)[0]
     speed0 = base.step_length * base.frequency / base.duty                         # m/s
     grid = [(0.0,) + o for o in itertools.product((0.0, 0.25, 0.5, 0.75), repeat=3)]
-    pool = [candidate(base, fps / p, o, base.duty, speed0, base.swing_height) for p in periods for o in grid]
+    pool = [candidate(base, fps / p, o, d, speed0, base.swing_height)
+            for p in periods for o in grid for d in cfg.grid_duties]
     pool.sort(key=cost)
     best_patterns = pool[:cfg.top_patterns]
     pool = [replace(p, duty=d, step_length=speed0 * d / p.frequency) for p in best_patterns for d in cfg.duties]
@@ -225,6 +227,9 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
     ``candidates`` (renders made), ``seconds`` and ``finalists`` (the best candidates). ValueError
     (one line) for a still video, one with no periodic motion, or one too short for two cycles."""
     t0 = time.time()
+    raw = np.asarray(frames, dtype=np.float32) / 255.0
+    if len(raw) > 1 and float(np.mean((raw[1:] - raw[:-1]) ** 2)) < MIN_MOTION:   # before painting, which
+        raise ValueError("the video is a still image: no motion to fit a gait to")  # turns codec noise into flicker
     frames = silhouettes(frames)
     if abs(fps - spec.control_hz) > 1e-6:
         raise ValueError(f"the video runs at {fps:g} fps, not {spec.name}'s control rate {spec.control_hz:g} Hz")
