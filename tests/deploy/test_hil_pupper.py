@@ -5,9 +5,9 @@ virl_quad.deploy.serve`` run as subprocesses on free ports (peer config: multica
 off); this test process is the operator (STATUS, ARM, E-stop). Lock-step makes the simulated
 run independent of machine load: no assertion depends on wall-clock timing, only on ticks.
 
-(a) the shipped policy (the server's default: ``policies/pupper_trot.pt`` once a VIRL run
-    passes its bar, until then ``policies/pupper_trot_tracker_bc.pt``, the privileged tracker
-    distilled by ``python -m virl_quad.distill``) drives the Pupper for 10 s of sim time: every
+(a) the shipped policy (the server's default: ``policies/pupper_trot.pt``, the VIRL trot, else
+    ``policies/pupper_trot_tracker_bc.pt``, the privileged tracker distilled by
+    ``python -m virl_quad.distill``) drives the Pupper for 10 s of sim time: every
     applied command is safe, the robot stays up, and it moves forward, as far as it does in
     the training env within a factor 2 (the deployment chain reproduces training)
 (b) SIGKILL of the server -> DAMPING after 3 held periods (seen in STATUS); a restarted
@@ -163,7 +163,7 @@ def _env_run(path) -> tuple[float, bool]:
 
     policy = load_policy(path)
     env = envs.make("pupper", demo=demo_lib.load("trot", "pupper"), randomize=False, render=False, rsi=False,
-                    episode_seconds=DRIVE_SECONDS)
+                    episode_seconds=DRIVE_SECONDS, **policy.contract.env_overrides())   # its own actions (TG)
     try:
         obs, _ = env.reset(seed=0, options={"demo_step": 0})
         traj, _, fell = record_episode(env, lambda o: policy.act(o["policy"]), obs)

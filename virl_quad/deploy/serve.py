@@ -50,8 +50,8 @@ from virl_quad.policy.action import ActionMap
 from virl_quad.policy.observation import policy_observation, yaw
 
 _POLICIES = Path(__file__).resolve().parents[2] / "policies"
-#: Policies served when --policy is not given, the first one present: the VIRL policy of the
-#: training pipeline (once a run passes its bar), then the shipped behaviour-cloned tracker
+#: Policies served when --policy is not given, the first one present: the VIRL trot of the
+#: training pipeline (policies/README.md), then the shipped behaviour-cloned tracker
 #: (``python -m virl_quad.distill``: walks on the nominal robot; not learned from video).
 SHIPPED_POLICIES: tuple[Path, ...] = (_POLICIES / "pupper_trot.pt", _POLICIES / "pupper_trot_tracker_bc.pt")
 
