@@ -93,36 +93,33 @@ PAINT = 255              # the background's new gray level: white (a mid gray, t
 
 
 def background_levels(frames: np.ndarray) -> np.ndarray:
-    """The flat background's gray levels of a video (T, H, W) uint8: those filling at least
-    :data:`BACKGROUND_SHARE` of its top or bottom :data:`BORDER_ROWS` rows (sky and ground of a
-    render; none for a textured background). int64 array, sorted."""
+    """The gray levels that count as the flat background of a video (T, H, W) uint8: those filling
+    at least :data:`BACKGROUND_SHARE` of its top or bottom :data:`BORDER_ROWS` rows (sky and ground
+    of a render; none for a textured background), and every level within :data:`TOLERANCE` of
+    one. int64 array, sorted."""
     frames = np.asarray(frames, dtype=np.uint8)
     levels: set[int] = set()
     for rows in (frames[:, :BORDER_ROWS], frames[:, -BORDER_ROWS:]):
         counts = np.bincount(rows.reshape(-1), minlength=256)
         levels.update(int(v) for v in np.flatnonzero(counts >= BACKGROUND_SHARE * rows.size))
-    return np.array(sorted(levels), dtype=np.int64)
+    if not levels:
+        return np.zeros(0, np.int64)
+    lv = np.array(sorted(levels), dtype=np.int64)
+    return np.unique(np.clip(lv[:, None] + np.arange(-TOLERANCE, TOLERANCE + 1)[None], 0, 255))
 
 
 def paint(frames: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """uint8 frames with every pixel at (within :data:`TOLERANCE` of) one of ``levels`` set to
-    white (:data:`PAINT`): the robot's silhouette, with its shading, on a blank background."""
+    """uint8 frames with every pixel at one of ``levels`` (:func:`background_levels`) set to white
+    (:data:`PAINT`): the robot's silhouette, with its shading, on a blank background."""
     frames = np.asarray(frames, dtype=np.uint8)
     if len(levels) == 0:
         return frames.copy()
-    return np.where(np.isin(frames, _widened(levels)), np.uint8(PAINT), frames)
-
-
-def _widened(levels) -> np.ndarray:
-    """The levels with every value within :data:`TOLERANCE` of one."""
-    lv = np.asarray(levels, dtype=np.int64)
-    return np.unique(np.clip(lv[:, None] + np.arange(-TOLERANCE, TOLERANCE + 1)[None], 0, 255))
+    return np.where(np.isin(frames, levels), np.uint8(PAINT), frames)
 
 
 def paint_float(x: torch.Tensor, levels: torch.Tensor) -> torch.Tensor:
     """:func:`paint` for float frames in [0, 1] (levels as an int64 tensor on x's device)."""
     if levels.numel() == 0:
         return x
-    wide = torch.from_numpy(_widened(levels.cpu().numpy())).to(levels.device)
-    hit = torch.isin(torch.round(x * 255.0).to(torch.int64), wide)
+    hit = torch.isin(torch.round(x * 255.0).to(torch.int64), levels)
     return torch.where(hit, torch.full_like(x, PAINT / 255.0), x)

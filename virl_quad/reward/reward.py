@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from virl_quad.reward.config import RewardConfig
+from virl_quad.reward.config import RewardConfig, without_retired
 from virl_quad.reward.dataset import EpisodeStore
 from virl_quad.reward.frames import FRAME, background_levels, paint, paint_float, to_float, to_mask, to_uint8
 from virl_quad.reward.losses import total_loss
@@ -89,7 +89,8 @@ class RewardModel:
         self.cfg, self.seed, self.device = cfg, int(seed), torch.device(device)
         self._raw = (demo, clips)                    # as given: what a checkpoint saves
         levels = background_levels(demo) if cfg.paint_background else np.zeros(0, np.int64)
-        self.levels = torch.from_numpy(levels).to(self.device)
+        self._levels = levels                                    # gray levels painted white
+        self._levels_t = torch.from_numpy(levels).to(self.device)
         self.demo, self.clips = paint(demo, levels), [paint(c, levels) for c in clips]   # what the model sees
         self.dataset = EpisodeStore(cfg.max_bytes, cfg.max_episode_frames)
         with torch.random.fork_rng(devices=[]):  # seeded weight init, caller's global RNG untouched
@@ -119,11 +120,11 @@ class RewardModel:
     # -- data and training -------------------------------------------------------------------
     def _paint(self, frames, name: str, axes: str) -> np.ndarray:
         """Checked uint8 frames with the background painted (``cfg.paint_background``)."""
-        return paint(to_uint8(frames, name, axes), self.levels.cpu().numpy())
+        return paint(to_uint8(frames, name, axes), self._levels)
 
     def _float(self, frames, name: str, axes: str) -> torch.Tensor:
         """Checked float frames in [0, 1] on the model's device, background painted."""
-        return paint_float(to_float(frames, name, axes, self.device), self.levels)
+        return paint_float(to_float(frames, name, axes, self.device), self._levels_t)
 
     def add_episode(self, agent_frames, expert_frames) -> None:
         """Store one agent episode with its matching expert frames, each [T, 48, 48] uint8."""
@@ -242,7 +243,7 @@ class RewardModel:
         (:data:`RESUME_MAY_CHANGE` aside: a resumed run may draw pairs or shape the reward differently)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
-        saved, mine = dict(d["config"]), self.cfg.to_dict()
+        saved, mine = without_retired(d["config"]), self.cfg.to_dict()   # an older version's settings
         for key in RESUME_MAY_CHANGE:                 # how pairs are drawn and d becomes a reward
             saved.pop(key, None)
             mine.pop(key, None)

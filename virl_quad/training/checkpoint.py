@@ -101,13 +101,11 @@ def contract_of(data: dict, robot: str):
 
 
 def load_reward_model(run_dir: str | Path):
-    """A run's distance model with its demonstration: ``(reward model, Demonstration, clips, robot)``
-    (settings of retired features in the model's saved config dropped, see
-    :func:`~virl_quad.reward.config.without_retired`).
+    """A run's distance model with its demonstration: ``(reward model, Demonstration, clips, robot)``.
 
     ValueError (one line) when the run has no checkpoint or no learned distance (oracle)."""
     from virl_quad import demo as demo_lib
-    from virl_quad.reward.config import RewardConfig, without_retired
+    from virl_quad.reward.config import RewardConfig
     from virl_quad.reward.reward import build_reward
 
     run_dir = Path(run_dir)
@@ -115,7 +113,6 @@ def load_reward_model(run_dir: str | Path):
     d = data.get("reward", {})
     if "net" not in d:
         raise ValueError(f"{run_dir}: this run has no learned distance model (oracle reward?)")
-    d = {**d, "config": without_retired(d["config"])}
     clips = [c.numpy() for c in d["clips"]]
     rm = build_reward(RewardConfig.from_dict(d["config"]), d["demo"].numpy(), clips, d["seed"])
     rm.load_state_dict(d)

@@ -22,7 +22,6 @@ import torch
 from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
-from virl_quad.reward.config import without_retired
 
 
 def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -81,11 +80,7 @@ class LearnedReward:
         return self.model.state_dict()
 
     def load_state_dict(self, d: dict) -> None:
-        """Restore the distance model and optimiser. A checkpoint of an older version may hold
-        settings of retired features in the model's config (dropped, see
-        :func:`~virl_quad.reward.config.without_retired`) and a rollout count (ignored)."""
-        if isinstance(d.get("config"), dict):
-            d = {**d, "config": without_retired(d["config"])}
+        """Restore the distance model and optimiser (an older version's rollout count is ignored)."""
         self.model.load_state_dict(d)
 
 

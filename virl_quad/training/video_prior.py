@@ -50,7 +50,7 @@ MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) be
 
 @dataclass(frozen=True)
 class VideoFitConfig:
-    """How hard :func:`fit_tg_to_video` searches (defaults: about a minute on 2 cores)."""
+    """How hard :func:`fit_tg_to_video` searches (the defaults: 295 kinematic renders)."""
 
     grid_duties: tuple[float, ...] = (0.3, 0.6)          # duty factors of the phase-pattern grid
     duties: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75)   # duty factors tried for the best patterns
@@ -84,10 +84,9 @@ def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
     if hi < lo + 2:
         raise ValueError(f"the video ({len(x)} frames at {fps:g} fps) is too short to find a gait period: "
                          f"it needs two cycles of at least {1 / GAIT_BAND[1]:.1f} s")
-    change = float(np.mean((x[1:] - x[:-1]) ** 2))
-    if change < MIN_MOTION:
-        raise ValueError("the video is a still image: no motion to fit a gait to")
     var = float(np.mean(x ** 2))
+    if var < MIN_MOTION:
+        raise ValueError("the video is a still image: no motion to fit a gait to")
     lags = np.arange(lo, hi + 1)
     diff = np.array([np.mean((x[k:] - x[:-k]) ** 2) for k in lags])
     best = float(diff.min())
@@ -199,7 +198,7 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
             for p in periods for o in grid for d in cfg.grid_duties]
     pool.sort(key=cost)
     best_patterns = pool[:cfg.top_patterns]
-    pool = [replace(p, duty=d, step_length=speed0 * d / p.frequency) for p in best_patterns for d in cfg.duties]
+    pool = [candidate(p, p.frequency, p.offsets, d, speed0, base.swing_height) for p in best_patterns for d in cfg.duties]
     pool = sorted(pool, key=cost)
     best = pool[0]
     sized = [candidate(best, best.frequency, best.offsets, best.duty, speed0 * v, base.swing_height * w)
