@@ -39,3 +39,34 @@ def test_unknown_reward_is_one_error_line(tmp_path: Path) -> None:
     assert p.stderr.strip() == "error: unknown reward 'foo' in --rewards; choose from: " \
         "virl, frame, sequence, no_ae, gaifo, oracle, prior", p.stderr
     assert not (tmp_path / "x").exists()                # refused before anything was made
+
+
+def test_tiny_confusion_writes_matrix_and_reuses_finished_runs(tmp_path: Path) -> None:
+    out = tmp_path / "conf"
+    args = ("--confusion", "trot,pace", "--minutes", "1", "--episodes", "1", "--seconds", "0.5", "--no-video",
+            "--out", str(out), TINY_TRAIN)
+    p = run(*args)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    data = json.loads((out / "confusion.json").read_text())
+    matrix = data["matrix"]
+    assert data["gaits"] == ["trot", "pace"] and len(matrix) == 2 and all(len(row) == 2 for row in matrix)
+    assert all(0 < v <= 1 for row in matrix for v in row), matrix
+    assert matrix[0] != matrix[1]                        # two policies, two different rows
+    for gait in ("trot", "pace"):                        # VIRL trained on each gait's own video
+        config = json.loads((out / gait / "config.json").read_text())
+        assert config["reward"] == "virl" and config["demo"] == gait, config
+    assert "| trot |" in (out / "confusion.md").read_text()
+    assert (out / "confusion.png").stat().st_size > 1000
+    stamp = (out / "trot" / "checkpoint.pt").stat().st_mtime
+    again = run(*args)                                   # finished runs are reused, not trained again
+    assert again.returncode == 0 and again.stdout.count("reusing the finished run") == 2, again.stdout[-2000:]
+    assert (out / "trot" / "checkpoint.pt").stat().st_mtime == stamp
+
+
+def test_bad_confusion_lists_are_one_error_line(tmp_path: Path) -> None:
+    for gaits, message in (("trot", "two or more distinct"), ("trot,trot", "two or more distinct"),
+                           ("trot,foo", "cannot use 'foo' as a demonstration")):
+        p = run("--confusion", gaits, "--out", str(tmp_path / "x"))
+        assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+        assert p.stderr.startswith("error:") and message in p.stderr, p.stderr
+        assert not (tmp_path / "x").exists()

@@ -10,26 +10,19 @@ and its figures. Exit status: 0 all checks pass, 1 some check fails,
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
 from virl_quad import robots
+from virl_quad.cli import Parser
 from virl_quad.quiet import quiet_fd
 
 CHOICES = (*robots.names(), "all")
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one clear line, exit 2, no usage dump
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m virl_quad.check", description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", default="all", metavar="{" + ",".join(CHOICES) + "}",
-                   help="robot to check (default: all)")
+def _parser() -> Parser:
+    p = Parser(prog="python -m virl_quad.check", description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default="all", metavar="{" + ",".join(CHOICES) + "}", help="robot to check")
     p.add_argument("--samples", type=int, default=100, help="random configurations for the FK comparison")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     return p

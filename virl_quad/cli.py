@@ -1,6 +1,8 @@
 """Command-line plumbing shared by the entry modules.
 
-- :func:`parser_from_dataclass`: an argparse parser whose options are a dataclass's
+- :class:`Parser`: argparse with one-line errors (``error: ...``, exit code 2, no usage
+  block) and every option's default in its help; every entry module uses it.
+- :func:`parser_from_dataclass`: a :class:`Parser` whose options are a dataclass's
   fields and whose help texts are the fields' trailing ``# comments``.
 - :func:`run_main`: run a ``main`` and turn expected failures (bad input) into one
   line on stderr and exit code 2, never a traceback.
@@ -23,6 +25,29 @@ class UserError(Exception):
     """A failure caused by the user's input; shown as one line, exit code 2."""
 
 
+class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
+    """Help texts end with the option's default, unless it is required or has none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.required or action.default is None:
+            return action.help
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one ``error: ...`` line (exit code 2) and whose help
+    shows each option's default. Subcommand parsers made from it are of the same kind."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _DefaultsHelp)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> typing.NoReturn:  # argparse's hook for a bad command line
+        """Print ``error: <message>`` on stderr and exit 2 (argparse prints the usage block too)."""
+        print(f"error: {message}", file=sys.stderr)
+        sys.exit(2)
+
+
 def field_comments(cls: type) -> dict[str, str]:
     """Map each field of dataclass ``cls`` to the comment written after it in the source."""
     out: dict[str, str] = {}
@@ -43,9 +68,8 @@ def _arg_type(tp: Any) -> Callable | None:
 
 
 def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> argparse.ArgumentParser:
-    """An argparse parser with one ``--kebab-case`` option per field of dataclass ``cls``."""
-    parser = argparse.ArgumentParser(description=description,
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter, **kwargs)
+    """A :class:`Parser` with one ``--kebab-case`` option per field of dataclass ``cls``."""
+    parser = Parser(description=description, **kwargs)
     helps = {k: v.replace("%", "%%") for k, v in field_comments(cls).items()}  # argparse formats help with %
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):

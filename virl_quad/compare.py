@@ -39,6 +39,7 @@ class CompareArgs:
     out: str = ""                                   # output folder (default: runs/compare-<robot>-<demo>-<date>)
     video: bool = True                              # each run writes its side-by-side video
     train_args: str = ""                            # further options for every training run, written --train-args="--num-envs 32 --eval-every 10"
+    confusion: str = ""                             # instead: comma-separated gaits (e.g. trot,pace,bound), VIRL trained on each video and scored against each reference (see virl_quad.confusion)
 
 
 def parse_rewards(text: str) -> list[str]:
@@ -54,16 +55,18 @@ def parse_rewards(text: str) -> list[str]:
     return names
 
 
-def train_one(args: CompareArgs, reward: str, run_dir: Path) -> None:
-    """One training run (a subprocess: a failing run is reported, the others go on)."""
-    cmd = [sys.executable, "-m", "virl_quad.train", "--robot", args.robot, "--demo", args.demo,
+def train_one(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> None:
+    """One training run on ``demo`` (default ``args.demo``) as a subprocess, logged beside
+    ``run_dir``: a failing run raises RuntimeError with its last log line."""
+    cmd = [sys.executable, "-m", "virl_quad.train", "--robot", args.robot, "--demo", demo or args.demo,
            "--reward", reward, "--minutes", str(args.minutes), "--seed", str(args.seed),
            "--run-dir", str(run_dir), "--video" if args.video else "--no-video", *args.train_args.split()]
     print(f"[{reward}] {' '.join(cmd[1:])}", flush=True)
-    with open(run_dir.parent / f"{reward}.log", "w") as log:
+    log_path = run_dir.parent / f"{run_dir.name}.log"
+    with open(log_path, "w") as log:
         p = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT)
     if p.returncode != 0:
-        tail = (run_dir.parent / f"{reward}.log").read_text().strip().splitlines()[-1:] or ["?"]
+        tail = log_path.read_text().strip().splitlines()[-1:] or ["?"]
         raise RuntimeError(f"training with --reward {reward} failed (exit {p.returncode}): {tail[0]}")
 
 
@@ -149,10 +152,14 @@ def plots(out: Path, results: dict[str, dict], standing: dict) -> None:
 
 
 def main(args: CompareArgs) -> int:
-    """Train, evaluate, tabulate and plot every reward; exit 2 on bad options."""
-    rewards = parse_rewards(args.rewards)
+    """Train, evaluate, tabulate and plot every reward (or the gait confusion); exit 2 on bad options."""
     if args.minutes <= 0 or args.episodes < 1 or args.seconds <= 0:
         raise UserError("--minutes and --seconds must be > 0 and --episodes >= 1")
+    if args.confusion:
+        from virl_quad.confusion import run_confusion
+
+        return run_confusion(args, Path(args.out or f"runs/confusion-{args.robot}-{time.strftime('%Y%m%d-%H%M%S')}"))
+    rewards = parse_rewards(args.rewards)
     out = Path(args.out or f"runs/compare-{args.robot}-{Path(args.demo).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     if any((out / r / "checkpoint.pt").exists() for r in rewards):
         raise UserError(f"{out} already holds runs of this comparison: give another --out")

@@ -9,14 +9,13 @@ same figures for holding the default pose (the baseline the policy must beat).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from virl_quad.cli import UserError, run_main
+from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.policy_io import LoadedPolicy, load_policy
 
 
@@ -37,10 +36,10 @@ def main(argv: list[str] | None = None) -> int:
     from virl_quad import demo as demo_lib
     from virl_quad.demo.score import evaluate
 
-    parser = argparse.ArgumentParser(prog="python -m virl_quad.evaluate", description=__doc__.split("\n\n")[0])
+    parser = Parser(prog="python -m virl_quad.evaluate", description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True, help="exported policy (.pt with its .json beside it)")
-    parser.add_argument("--demo", default="", help="demonstration (default: the one the policy learned from)")
-    parser.add_argument("--episodes", type=int, default=10, help="episodes (seeded 0..N-1)")
+    parser.add_argument("--demo", default="", help="demonstration (empty: the one the policy learned from)")
+    parser.add_argument("--episodes", type=int, default=10, help="episodes (seeded from --seed)")
     parser.add_argument("--seconds", type=float, default=10.0, help="s per episode")
     parser.add_argument("--seed", type=int, default=0, help="first episode seed")
     parser.add_argument("--no-randomize", action="store_true", help="evaluate without domain randomisation")

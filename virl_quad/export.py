@@ -8,7 +8,6 @@ Writes ``NAME.pt`` (observation normaliser baked in, deterministic mean action),
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -18,7 +17,7 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from virl_quad import robots
-from virl_quad.cli import UserError, run_main
+from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy_io import metadata_for, save_policy
 from virl_quad.training import checkpoint
@@ -109,7 +108,7 @@ def _export_onnx(actor: MLPModel, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
-    parser = argparse.ArgumentParser(prog="python -m virl_quad.export", description=__doc__.split("\n\n")[0])
+    parser = Parser(prog="python -m virl_quad.export", description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", help="training run folder (holds checkpoint.pt)")
     parser.add_argument("--out", required=True, help="output policy path, e.g. policies/pupper_trot.pt")
     parser.add_argument("--onnx", action="store_true", help="also write NAME.onnx")

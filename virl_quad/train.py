@@ -156,7 +156,8 @@ def _prior_from_video(demo, spec, run_dir: Path):
     tg, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec,
                                          log=lambda line: print(line, flush=True))
     run_dir.mkdir(parents=True, exist_ok=True)
-    sheet = save_fit_sheet(silhouettes(demo.frames), fitted, run_dir / "prior_fit.png")
+    sheet = save_fit_sheet(silhouettes(demo.frames), fitted, run_dir / "prior_fit.png", fps=demo.fps,
+                           title=f"video | fit: {tg.frequency:.2f} Hz, duty {tg.duty:.2f}")
     (run_dir / "prior_fit.json").write_text(json.dumps({"tg": tg.to_dict(), **report}, indent=2) + "\n")
     return tg, f"{describe(tg, report)}; video | fit: {sheet}"
 
@@ -221,7 +222,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     try:
         if data is not None:
             runner.restore(data)
-            log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps)")
+            log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps); "
+                f"--iterations {args.iterations} is the total, so at most "
+                f"{max(args.iterations - runner.current_learning_iteration, 0)} more")
         log(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
         if not runner.standing and demo.motion is not None:

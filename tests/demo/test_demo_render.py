@@ -99,6 +99,12 @@ def test_contact_sheet(tmp_path):
     frames = np.random.default_rng(0).integers(0, 255, (40, 48, 48), dtype=np.uint8)
     img = sheet.contact_sheet(frames, columns=8, max_frames=16, scale=2, gap=2)
     assert img.shape == (2 * (96 + 2) + 2, 8 * (96 + 2) + 2)
-    d = Demonstration(frames=frames, fps=50.0)
+    d = Demonstration(frames=frames, fps=50.0, source="gait:trot")
     path = sheet.save_contact_sheet(d, tmp_path / "s.png")
-    np.testing.assert_array_equal(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), sheet.contact_sheet(frames))
+    titled = sheet.contact_sheet(frames, fps=50.0, title="gait:trot")
+    np.testing.assert_array_equal(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), titled)
+    assert titled.shape[0] == sheet.contact_sheet(frames).shape[0] + sheet.TITLE_PX
+    assert (titled[:sheet.TITLE_PX] < 128).any()         # the title is written in its band
+    by_index = sheet.contact_sheet(frames, max_frames=16, scale=2)
+    by_time = sheet.contact_sheet(frames, max_frames=16, scale=2, fps=50.0)
+    assert not np.array_equal(by_index, by_time)         # tiles labelled with their time, not index

@@ -183,3 +183,29 @@ def test_bad_resume_and_corrupt_checkpoint(tmp_path: Path) -> None:
 def test_reward_choice_is_checked() -> None:
     p = run("virl_quad.train", "--reward", "bogus")
     assert p.returncode == 2 and "invalid choice" in p.stderr
+    assert p.stderr.startswith("error: ") and len(p.stderr.strip().splitlines()) == 1, p.stderr
+
+
+def test_ctrl_c_checkpoints_without_a_traceback(tmp_path: Path) -> None:
+    """A real SIGINT to the whole process group, as a terminal's Ctrl-C sends it: the env worker
+    stays quiet, the trainer writes its checkpoint and exits 130 with one line."""
+    run_dir = tmp_path / "run"
+    cmd = [sys.executable, "-m", "virl_quad.train", "--robot", "pupper", "--iterations", "500",
+           "--run-dir", str(run_dir), *TINY]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.time() + 240
+        while time.time() < deadline and proc.poll() is None:
+            if (run_dir / checkpoint.LATEST).exists() and checkpoint.load(run_dir)["iteration"] >= 2:
+                break
+            time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, (out[-1500:], err[-1500:])
+    assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err, err[-3000:]
+    assert err.strip() == "interrupted", err
+    assert "interrupted: checkpoint written at iteration" in out
+    assert checkpoint.load(run_dir)["iteration"] >= 2

@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+import typing
 from pathlib import Path
 
 import numpy as np
 
 from virl_quad import robots
+from virl_quad.cli import Parser
 
 EXIT_USAGE = 2
 
@@ -29,10 +31,10 @@ class UsageError(Exception):
     """A command-line mistake: reported in one line, exit code 2."""
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (no usage block)."""
+class _Parser(Parser):
+    """The shared parser, raising its one-line error so :func:`main` can return exit code 2."""
 
-    def error(self, message: str) -> None:  # noqa: D102 - argparse hook
+    def error(self, message: str) -> typing.NoReturn:  # noqa: D102 - argparse hook
         raise UsageError(message)
 
 
@@ -131,13 +133,14 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render a built-in gait or a motion file")
     r.add_argument("--robot", required=True, help=f"one of: {', '.join(robots.names())}")
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--gait", help=f"built-in gait: {', '.join(GAIT_NAMES)} (default trot)")
+    g.add_argument("--gait", help=f"built-in gait: {', '.join(GAIT_NAMES)} (trot when neither this nor --motion)")
     g.add_argument("--motion", help="motion file (.txt/.json motion_imitation clip, Laikago recording)")
     r.add_argument("--out", required=True, help="output .npz")
     r.add_argument("--video", help="also write an .mp4 preview here")
     r.add_argument("--video-size", type=int, default=PREVIEW_SIZE, help="preview side in px (render preview)")
-    r.add_argument("--preview", choices=PREVIEWS, default="frames",
-                   help="render: larger RGB render; frames: the 48x48 frames enlarged 5x")
+    r.add_argument("--preview", choices=PREVIEWS, default="render",
+                   help="what --video shows: render, a larger RGB render to watch; frames, the 48x48 "
+                        "frames the reward model sees, enlarged")
     r.add_argument("--seconds", type=float, default=2.0, help="at least this long, whole cycles (s)")
     r.set_defaults(func=cmd_render)
     i = sub.add_parser("import", help="import a video file")
@@ -149,24 +152,24 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("show", help="contact sheet of a saved demonstration")
     s.add_argument("demo", help="demonstration .npz")
     s.add_argument("--out", required=True, help="output .png")
-    s.add_argument("--columns", type=int, default=8)
+    s.add_argument("--columns", type=int, default=8, help="frames per row of the sheet")
     s.add_argument("--frames", type=int, default=32, help="at most this many frames, evenly spaced")
     s.set_defaults(func=cmd_show)
     c = sub.add_parser("contacts", help="ground-contact table of motion clips")
     c.add_argument("--dir", default=None, help="folder of clips (default ../shared/motions)")
-    c.add_argument("--robots", nargs="+", default=["laikago", "pupper"])
+    c.add_argument("--robots", nargs="+", default=["laikago", "pupper"], help="robots to check each clip on")
     c.add_argument("--strict", action="store_true", help="exit 1 when a clip fails the criteria")
     c.set_defaults(func=cmd_contacts)
     k = sub.add_parser("score", help="self-check of the ground-truth score on a gait")
-    k.add_argument("--robot", default="pupper")
+    k.add_argument("--robot", default="pupper", help=f"one of: {', '.join(robots.names())}")
     k.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
-    k.add_argument("--seconds", type=float, default=4.0)
+    k.add_argument("--seconds", type=float, default=4.0, help="length of the scored stretch (s)")
     k.set_defaults(func=cmd_score)
     t = sub.add_parser("roundtrip", help="render -> .mp4 -> import error and forward-progress visibility")
-    t.add_argument("--robot", default="pupper")
+    t.add_argument("--robot", default="pupper", help=f"one of: {', '.join(robots.names())}")
     t.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
-    t.add_argument("--preview", choices=PREVIEWS, default="frames")
-    t.add_argument("--seconds", type=float, default=2.0)
+    t.add_argument("--preview", choices=PREVIEWS, default="frames", help="which video to round-trip (see render)")
+    t.add_argument("--seconds", type=float, default=2.0, help="length of the render (s)")
     t.set_defaults(func=cmd_roundtrip)
     return p
 

@@ -177,7 +177,7 @@ def record_episode(env, policy: Callable[[dict], np.ndarray], obs: dict,
 
 def evaluate(policy: Callable[[dict], np.ndarray], robot: str, demo, episodes: int = 5, seed: int = 0,
              episode_seconds: float = 10.0, randomize: bool = True, video: str | None = None,
-             **env_overrides) -> dict:
+             trajectories: list | None = None, **env_overrides) -> dict:
     """Score ``policy`` (obs dict -> 12 actions) over ``episodes`` seeded episodes of ``demo`` on ``robot``.
 
     Uses ``virl_quad.envs.make(robot, demo=demo, randomize=..., episode_seconds=...)`` (RSI included).
@@ -185,7 +185,8 @@ def evaluate(policy: Callable[[dict], np.ndarray], robot: str, demo, episodes: i
     ``survival_fraction`` (mean share of the episode lived before a fall), ``falls``,
     ``speed_ratio`` (forward travel along the reference's direction over the reference's;
     nan for a motion in place) and ``episodes`` (per-episode figures). ``video``: an ``.mp4``
-    of the first episode.
+    of the first episode. ``trajectories``: a list to append each episode's ``(Trajectory,
+    demonstration times)`` to, for scoring against other references.
     """
     from virl_quad import envs
     from virl_quad.kinematics import Kinematics
@@ -202,6 +203,8 @@ def evaluate(policy: Callable[[dict], np.ndarray], robot: str, demo, episodes: i
             obs, _ = env.reset(seed=seed + ep)
             frames = [] if (video is not None and ep == 0) else None
             traj, times, fell = record_episode(env, policy, obs, frames)
+            if trajectories is not None:
+                trajectories.append((traj, times))
             res = score_trajectory(traj, motion, times, robot, kin=kin)
             res.pop("per_step")
             steps = len(traj) - 1

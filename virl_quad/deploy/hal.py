@@ -24,7 +24,6 @@ still meets the watchdog (DAMPING after more than 3 control periods without a co
 
 from __future__ import annotations
 
-import argparse
 import struct
 import sys
 import threading
@@ -37,7 +36,7 @@ import numpy as np
 import zenoh
 
 from virl_quad import robots
-from virl_quad.cli import UserError, run_main
+from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._record import Recorder
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
@@ -372,27 +371,30 @@ def main(config: HalConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> HalConfig:
     """Parse the command line into a :class:`HalConfig`."""
-    p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.hal", description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", default="pupper", help="robot spec: " + ", ".join(robots.names()))
-    p.add_argument("--backend", default="sim", help="robot backend: " + ", ".join(backend_names()))
-    p.add_argument("--robot-id", help="robot instance id in the key expressions (default <robot>-01)")
-    p.add_argument("--zenoh", default="peer", help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    d = HalConfig()                      # the defaults, written once (in the dataclass)
+    p = Parser(prog="python -m virl_quad.deploy.hal", description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default=d.robot, help="robot spec: " + ", ".join(robots.names()))
+    p.add_argument("--backend", default=d.backend, help="robot backend: " + ", ".join(backend_names()))
+    p.add_argument("--robot-id", default=d.robot_id, help="robot instance id in the key expressions "
+                   "(unset: <robot>-01)")
+    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
     p.add_argument("--listen", action="append", help="listen endpoint, replaces the config's (repeatable)")
     p.add_argument("--connect", action="append", help="connect endpoint, replaces the config's (repeatable)")
     p.add_argument("--lockstep", action="store_true", help="advance one control period per answered state")
-    p.add_argument("--lockstep-timeout", type=float, help="s without an answer before ticking anyway "
-                   "(default 3 x control_dt)")
-    p.add_argument("--cmd-wait", type=float, default=0.5, help="real time: fraction of a period to wait for "
-                   "the answer to the state (default 0.5)")
+    p.add_argument("--lockstep-timeout", type=float, default=d.lockstep_timeout,
+                   help="s without an answer before ticking anyway (unset: 3 x control_dt)")
+    p.add_argument("--cmd-wait", type=float, default=d.cmd_wait,
+                   help="real time: fraction of a period to wait for the answer to the state")
     p.add_argument("--arm", action="store_true", help="arm at start (IDLE -> RAMP) without an operator ARM")
     p.add_argument("--reset-on-arm", action="store_true", help="sim: an accepted ARM first puts the robot "
                    "back on its feet (as an operator would)")
     p.add_argument("--randomize", action="store_true", help="sim: randomise the physics (seed --seed)")
-    p.add_argument("--seed", type=int, default=0, help="sim: randomisation seed")
-    p.add_argument("--port", help="pupper_serial: serial port of the motor board")
-    p.add_argument("--status-hz", type=float, default=5.0, help="STATUS rate, Hz")
-    p.add_argument("--record", help="write every tick to this .npz when stopping")
-    p.add_argument("--max-ticks", type=int, default=0, help="stop after this many control periods (0: never)")
+    p.add_argument("--seed", type=int, default=d.seed, help="sim: randomisation seed")
+    p.add_argument("--port", default=d.port, help="pupper_serial: serial port of the motor board")
+    p.add_argument("--status-hz", type=float, default=d.status_hz, help="STATUS rate, Hz")
+    p.add_argument("--record", default=d.record, help="write every tick to this .npz when stopping")
+    p.add_argument("--max-ticks", type=int, default=d.max_ticks, help="stop after this many control periods "
+                   "(0: never)")
     p.add_argument("--quiet", action="store_true", help="no log lines")
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
     return HalConfig(robot=a.robot, backend=a.backend, robot_id=a.robot_id, zenoh=a.zenoh, listen=a.listen,

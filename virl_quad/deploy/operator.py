@@ -12,7 +12,6 @@ the HAL accepts: ``operator`` may arm, every authenticated user may E-stop. ``ar
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -22,7 +21,7 @@ from typing import Any, Callable
 
 import zenoh
 
-from virl_quad.cli import UserError, run_main
+from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import StopFlag, open_config, open_session
 from virl_quad.deploy.protocol import MsgType, ProtocolError
@@ -166,13 +165,14 @@ def main(config: OperatorConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> OperatorConfig:
     """Parse the command line into an :class:`OperatorConfig`."""
-    p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.operator", description=__doc__.split("\n\n")[0])
-    p.add_argument("action", choices=["status", "arm", "estop"])
-    p.add_argument("--robot-id", default="pupper-01", help="the HAL's robot id")
-    p.add_argument("--zenoh", default="peer", help="Zenoh config name or .json5 path")
-    p.add_argument("--connect", action="append", help=f"HAL endpoint (default the config's, else {DEFAULT_CONNECT})")
-    p.add_argument("--reason", default="operator", help="estop: reason text")
-    p.add_argument("--wait", type=float, default=10.0, help="s to wait for the HAL and for the effect")
+    d = OperatorConfig("status")         # the defaults, written once (in the dataclass)
+    p = Parser(prog="python -m virl_quad.deploy.operator", description=__doc__.split("\n\n")[0])
+    p.add_argument("action", choices=["status", "arm", "estop"], help="what to do")
+    p.add_argument("--robot-id", default=d.robot_id, help="the HAL's robot id")
+    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config name or .json5 path")
+    p.add_argument("--connect", action="append", help=f"HAL endpoint (unset: the config's, else {DEFAULT_CONNECT})")
+    p.add_argument("--reason", default=d.reason, help="estop: reason text")
+    p.add_argument("--wait", type=float, default=d.wait, help="s to wait for the HAL and for the effect")
     p.add_argument("--watch", action="store_true", help="status: keep printing every second")
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
     return OperatorConfig(a.action, a.robot_id, a.zenoh, a.connect, a.reason, a.wait, a.watch)

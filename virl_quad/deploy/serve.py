@@ -27,7 +27,6 @@ commanding and waits for it to come back (then checks its ANNOUNCE again).
 
 from __future__ import annotations
 
-import argparse
 import gc
 import math
 import sys
@@ -42,7 +41,7 @@ import numpy as np
 import torch
 import zenoh
 
-from virl_quad.cli import UserError, run_main
+from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
 from virl_quad.deploy.protocol import MsgType, ProtocolError
@@ -358,16 +357,17 @@ def main(config: ServeConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> ServeConfig:
     """Parse the command line into a :class:`ServeConfig`."""
-    p = argparse.ArgumentParser(prog="python -m virl_quad.deploy.serve", description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", default="", help="exported policy NAME.pt (default: the first present of "
+    d = ServeConfig()                    # the defaults, written once (in the dataclass)
+    p = Parser(prog="python -m virl_quad.deploy.serve", description=__doc__.split("\n\n")[0])
+    p.add_argument("--policy", default=d.policy, help="exported policy NAME.pt (empty: the first present of "
                    + ", ".join(str(x.relative_to(_POLICIES.parent)) for x in SHIPPED_POLICIES) + ")")
-    p.add_argument("--robot-id", help="the HAL's robot id (default <policy robot>-01)")
-    p.add_argument("--zenoh", default="peer", help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
-    p.add_argument("--connect", action="append", help=f"endpoint of the HAL (repeatable; default the config's, "
+    p.add_argument("--robot-id", default=d.robot_id, help="the HAL's robot id (unset: <policy robot>-01)")
+    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    p.add_argument("--connect", action="append", help=f"endpoint of the HAL (repeatable; unset: the config's, "
                    f"else {DEFAULT_CONNECT})")
-    p.add_argument("--listen", action="append", help="listen endpoint (repeatable; default none)")
-    p.add_argument("--wait", type=float, default=30.0, help="s to wait for the HAL at start (0: forever)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument("--listen", action="append", help="listen endpoint (repeatable)")
+    p.add_argument("--wait", type=float, default=d.wait, help="s to wait for the HAL at start (0: forever)")
+    p.add_argument("--threads", type=int, default=d.threads, help="torch threads")
     p.add_argument("--quiet", action="store_true", help="no log lines")
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
     return ServeConfig(policy=a.policy, robot_id=a.robot_id, zenoh=a.zenoh, connect=a.connect, listen=a.listen,

@@ -18,6 +18,7 @@ Semantics rsl-rl relies on:
 from __future__ import annotations
 
 import multiprocessing as mp
+import signal
 import traceback
 from typing import Any
 
@@ -67,7 +68,9 @@ def _stack(dicts: list[dict]) -> dict:
 
 
 def _worker(conn, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
-    """Worker process loop: build a slice, then serve commands until 'close'."""
+    """Worker process loop: build a slice, then serve commands until 'close'. Ctrl-C is the
+    parent's to handle (it checkpoints and closes the workers): a worker ignores SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     torch.set_num_threads(1)
     try:
         sl = _Slice(robot, env_ids, seed, overrides)
@@ -121,12 +124,18 @@ class QuadrupedVecEnv(VecEnv):
             self._local = _Slice(robot, list(range(num_envs)), seed, overrides)
         else:
             ctx = mp.get_context("spawn")
-            for chunk in ids:
-                parent, child = ctx.Pipe()
-                p = ctx.Process(target=_worker, args=(child, robot, chunk.tolist(), seed, overrides), daemon=True)
-                p.start()
-                self._procs.append(p)
-                self._conns.append(parent)
+            # a new process inherits an ignored SIGINT, so a Ctrl-C while it starts up is not its to report
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            try:
+                for chunk in ids:
+                    parent, child = ctx.Pipe()
+                    p = ctx.Process(target=_worker, args=(child, robot, chunk.tolist(), seed, overrides),
+                                    daemon=True)
+                    p.start()
+                    self._procs.append(p)
+                    self._conns.append(parent)
+            finally:
+                signal.signal(signal.SIGINT, previous)
             self._gather()  # construction acknowledgements
         self._obs = self._to_tensordict(self._call("reset_all"))
 

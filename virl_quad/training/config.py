@@ -26,7 +26,7 @@ class TrainArgs:
     reward: str = field(default="virl", metadata={"choices": REWARDS})  # reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, oracle (ground-truth pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and warm start give alone)
     num_envs: int = 16                 # parallel simulated robots
     num_workers: int = -1              # env worker processes (-1: one per CPU core)
-    iterations: int = 1000             # PPO iterations to run (an upper bound when --minutes is given)
+    iterations: int = 1000             # PPO iterations the run ends at, in total: on --resume the ones already done count (an upper bound when --minutes is given)
     minutes: float = 18.0              # wall-clock budget in minutes from the start of the command to the end of training (prior fit, warm start and PPO; 0: none, run all iterations); the final evaluation, export and video follow, so the default main job takes about 20 minutes on 2 cores
     steps_per_env: int = 64            # env steps per env per iteration (rollout length)
     seed: int = 0                      # seed of envs, networks and sampling

@@ -265,7 +265,8 @@ def describe(params: TGParams, report: dict) -> str:
             f"{report['seconds']:.0f} s)")
 
 
-def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike) -> Path:
+def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike, fps: float = 0.0,
+                   title: str = "video | fitted gait") -> Path:
     """A PNG contact sheet of video | fitted gait, frame by frame, side by side (16 frames)."""
     import cv2
 
@@ -275,6 +276,6 @@ def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLik
                             np.asarray(fitted, np.uint8)], axis=2)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), contact_sheet(pairs, columns=4, max_frames=16)):
+    if not cv2.imwrite(str(path), contact_sheet(pairs, columns=4, max_frames=16, fps=fps, title=title)):
         raise ValueError(f"cannot write {path}")
     return path
