@@ -184,6 +184,7 @@ class Hal:
         body = self.ctl.status()
         body.update({
             "robot": self.spec.name, "robot_id": self.robot_id, "backend": self.config.backend,
+            "control_dt": float(self.spec.control_dt), "max_step": float(self.ctl.config.max_step),
             "lockstep": self.config.lockstep, "t": self.last_t if np.isfinite(self.last_t) else None,
             "overruns": self.overruns, "unanswered": self.unanswered, "cmd_tick": self.cmd_tick,
             "fault_tick": self.fault_tick, "policy_alive": self.policy_alive, "errors": dict(self.errors),

@@ -1,13 +1,16 @@
 """Operator console: watch a HAL's STATUS, re-arm it, E-stop it.
 
-    python -m virl_quad.deploy.operator status --robot-id pupper-01 [--watch]
+    python -m virl_quad.deploy.operator status --robot-id pupper-01 [--watch] [--json]
     python -m virl_quad.deploy.operator arm    --robot-id pupper-01
     python -m virl_quad.deploy.operator estop  --robot-id pupper-01 --reason "hand on the robot"
 
 Connects like the policy server (``--zenoh``, ``--connect``; default the config's endpoints,
 else ``tcp/127.0.0.1:7447``). Under ``secure_client.json5`` the session's user decides what
 the HAL accepts: ``operator`` may arm, every authenticated user may E-stop. ``arm`` and
-``estop`` wait for a STATUS that shows the effect and exit 1 if none comes.
+``estop`` wait for a STATUS that shows the effect and exit 1 if none comes. Each prints the
+HAL's STATUS for a person (mode, fault, base height and speed, time in ACTIVE, commands and
+what the safety layer did to them); ``--watch`` redraws it every second until Ctrl-C and
+``--json`` prints the raw STATUS bodies instead, one JSON line each, for scripts.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from virl_quad.cli import Parser, UserError, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import StopFlag, open_config, open_session
 from virl_quad.deploy.protocol import MsgType, ProtocolError
+from virl_quad.deploy.safety import CLAMPS
 from virl_quad.deploy.zenoh_config import load_config, publisher_options
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -38,6 +42,50 @@ def wait_until(pred: Callable[[], Any], timeout: float, interval: float = 0.02) 
         if value or time.monotonic() > deadline:
             return value
         time.sleep(interval)
+
+
+def _counts(d: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(d.items())) if d else "none"
+
+
+def format_status(status: dict[str, Any], state: P.RobotState | None = None) -> str:
+    """A STATUS body (and the newest STATE, if any) as lines a person reads."""
+    dt = status.get("control_dt")                                  # s
+    active = status.get("active_ticks")
+    lines = [f"{status.get('robot_id', '?')} ({status.get('robot', '?')}, {status.get('backend', '?')} backend)  "
+             f"mode {status.get('mode', '?')}  fault: {status.get('fault') or 'none'}"]
+    motion = []
+    if state is not None and state.base_pos is not None:
+        motion.append(f"base height {state.base_pos[2]:.3f} m")
+    if state is not None and state.base_vel is not None:
+        motion.append(f"forward speed {state.base_vel[0]:+.2f} m/s")
+    if state is not None and state.base_pos is None:
+        motion.append("base height and speed: not measured on this robot")
+    if status.get("mode") == "ACTIVE" and active is not None:
+        motion.append(f"ACTIVE for {active * dt:.1f} s" if dt else f"ACTIVE for {active} ticks")
+    if motion:
+        lines.append("  ".join(motion))
+    accepted, applied = status.get("accepted", 0), status.get("applied", 0)
+    lines.append(f"commands: {accepted} accepted, {applied} applied; rejected: {_counts(status.get('rejected', {}))}")
+    clamped = status.get("clamped", {})
+    if clamped:
+        lines.append("changed by the safety layer before being applied:")
+        for kind, n in sorted(clamped.items()):
+            share = f" of {applied} applied ({100.0 * n / applied:.0f} %)" if applied else ""
+            meaning = CLAMPS.get(kind, "")
+            if kind == "q_step" and status.get("max_step") is not None:
+                meaning = meaning.replace("max_step (rad)", f"{status['max_step']:g} rad")
+            lines.append(f"  {kind} {n}{share}: {meaning}")
+    else:
+        lines.append("changed by the safety layer before being applied: none")
+    lines.append(f"events: {_counts(status.get('events', {}))}")
+    extra = [f"policy alive: {'yes' if status.get('policy_alive') else 'no'}"] if "policy_alive" in status else []
+    extra += [f"{k} {status[k]}" for k in ("overruns", "unanswered") if k in status]
+    if status.get("errors"):
+        extra.append(f"errors: {_counts(status['errors'])}")
+    if extra:
+        lines.append("  ".join(extra))
+    return "\n".join(lines)
 
 
 class Operator:
@@ -125,7 +173,23 @@ class OperatorConfig:
     connect: list[str] | None = None     # endpoints; default the config's, else DEFAULT_CONNECT
     reason: str = "operator"             # estop: reason shown in STATUS fault
     wait: float = 10.0                   # s to wait for the HAL and for the effect
-    watch: bool = False                  # status: keep printing until Ctrl-C
+    watch: bool = False                  # keep showing the newest STATUS every second until Ctrl-C
+    json: bool = False                   # print raw STATUS bodies as JSON lines (for scripts)
+
+
+def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
+    """How a STATUS is shown: a JSON line, or the text view (redrawn in place on a terminal)."""
+    redraw = sys.stdout.isatty()
+
+    def show(status: dict[str, Any]) -> None:
+        if as_json:
+            print(json.dumps(status, sort_keys=True), flush=True)
+            return
+        with op._lock:
+            state = op.state
+        text = format_status(status, state)
+        print(("\x1b[H\x1b[J" if redraw else "") + text + ("" if redraw else "\n"), flush=True)
+    return show
 
 
 def main(config: OperatorConfig) -> int:
@@ -154,10 +218,11 @@ def main(config: OperatorConfig) -> int:
                 ok = st.get("mode") == "DAMPING"
             else:
                 st, ok = before, True
-            print(json.dumps(st, sort_keys=True))
+            show = _shower(config.json, op)
+            show(st)
             with StopFlag() as stop:
                 while config.watch and not stop.wait(1.0):
-                    print(json.dumps(op.latest(), sort_keys=True), flush=True)
+                    show(op.latest())
             return 0 if ok else 1
         finally:
             op.close()
@@ -173,9 +238,10 @@ def config_from_args(argv: list[str] | None = None) -> OperatorConfig:
     p.add_argument("--connect", action="append", help=f"HAL endpoint (unset: the config's, else {DEFAULT_CONNECT})")
     p.add_argument("--reason", default=d.reason, help="estop: reason text")
     p.add_argument("--wait", type=float, default=d.wait, help="s to wait for the HAL and for the effect")
-    p.add_argument("--watch", action="store_true", help="status: keep printing every second")
+    p.add_argument("--watch", action="store_true", help="keep showing the newest STATUS every second until Ctrl-C")
+    p.add_argument("--json", action="store_true", help="raw STATUS bodies as JSON lines, for scripts")
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
-    return OperatorConfig(a.action, a.robot_id, a.zenoh, a.connect, a.reason, a.wait, a.watch)
+    return OperatorConfig(a.action, a.robot_id, a.zenoh, a.connect, a.reason, a.wait, a.watch, a.json)
 
 
 if __name__ == "__main__":

@@ -103,6 +103,16 @@ def is_safe_command(cmd: JointCommand, spec: Any, config: SafetyConfig = SafetyC
     return bool(ok)
 
 
+#: What each ``clamped`` counter of STATUS means: an accepted command the safety layer changed
+#: before applying it, by kind (one count per command, however many joints it touched).
+CLAMPS: dict[str, str] = {
+    "q_limit": "a joint target outside the joint limits, clipped to them",
+    "q_step": "a joint target too far from the last applied one, moved at most max_step (rad) per period",
+    "gain": "kp or kd above the allowed maximum, lowered to it",
+    "tau_ff": "a feed-forward torque above the motor's limit (N·m), clipped",
+}
+
+
 class SafetyController:
     """State machine + command validator for one robot (see the module docstring)."""
 
@@ -118,6 +128,7 @@ class SafetyController:
         self.rejected_other: Counter[str] = Counter()  # bad ESTOP / ARM messages, "arm:bad_crc" etc.
         self.accepted = 0                         # commands that passed receive()
         self.applied = 0                          # ACTIVE ticks that applied a new command
+        self.active_ticks = 0                     # ticks in ACTIVE since it was last entered
         self._lock = threading.Lock()
         self._last_seq: int | None = None         # newest accepted sequence number
         self._pending: JointCommand | None = None  # newest accepted, not yet consumed by tick()
@@ -278,6 +289,7 @@ class SafetyController:
             if self.mode == Mode.RAMP:
                 out = self._ramp_step(pending)
             elif self.mode == Mode.ACTIVE:
+                self.active_ticks += 1
                 out = self._active_step(pending)
             elif self.mode == Mode.DAMPING:
                 out = self._damping(q_meas)
@@ -296,6 +308,7 @@ class SafetyController:
         if self._ramp_k >= self._ramp_n and pending is not None:
             self.mode = Mode.ACTIVE            # the policy is live: its next command is applied
             self.events["active"] += 1
+            self.active_ticks = 0
         return out
 
     def _active_step(self, pending: JointCommand | None) -> JointCommand:
@@ -407,7 +420,7 @@ class SafetyController:
         with self._lock:
             return {
                 "mode": self.mode.value, "fault": self.fault, "ticks": self.ticks,
-                "accepted": self.accepted, "applied": self.applied,
+                "accepted": self.accepted, "applied": self.applied, "active_ticks": self.active_ticks,
                 "rejected": dict(self.rejected), "clamped": dict(self.clamped), "events": dict(self.events),
                 "rejected_other": dict(self.rejected_other),
                 "last_seq": self._last_seq,

@@ -43,8 +43,8 @@ class TrainArgs:
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
-    ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible, but its phase can mislead the distance model) or plain (bench/reward_alignment.py ranks it far better; progress invisible)
-    adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1; measured with bench/reward_alignment.py: 1 gives every agent behaviour reward 0, 0 ranks nothing, 0.1 ranks as the ground-truth score does)
+    ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible to a person) or plain; the distance model paints either white (RewardConfig.paint_background)
+    adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves every behaviour rewarded alike
     learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
     critic_learning_rate: float = 1e-3  # fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl
     entropy_coef: float = 0.005        # PPO entropy bonus
