@@ -42,6 +42,7 @@ class TrainArgs:
     reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
     reward_lr: float = 1e-3            # distance-model Adam learning rate
     reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
+    reward_median: float = 0.0         # a learned reward's rollout is raised to the power that lifts its median to this when it is lower: the same order of behaviours, but a scale that does not sink towards 0 (and take the reason to stay up with it) as the distance model tells the agent from the expert; 0: the paper's reward as is
     other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
     ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible to a person) or plain; the distance model paints either white (RewardConfig.paint_background)
     adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves every behaviour rewarded alike
@@ -83,6 +84,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --prior-from {args.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.ground not in GROUNDS:
         raise ValueError(f"unknown --ground {args.ground!r}; choose one of: {', '.join(GROUNDS)}")
+    if not 0.0 <= args.reward_median < 1.0:
+        raise ValueError(f"--reward-median must be in [0, 1), got {args.reward_median}")
     if args.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.adversarial_weight}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
