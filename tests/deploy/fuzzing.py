@@ -1,4 +1,4 @@
-"""Malformed and valid COMMAND messages for the fuzz tests (``test_deploy_fuzz.py`` in process,
+"""Malformed and valid COMMAND messages for the fuzz tests (``test_fuzz.py`` in process,
 ``test_hil_fuzz.py`` against a real HAL over Zenoh).
 
 Not a test module: the tests load it by path (pytest runs with ``--import-mode=importlib``,

@@ -16,7 +16,7 @@ from virl_quad.kinematics.frames import quat_from_euler, random_quat
 from virl_quad.sim.world import World
 
 NAMES = ["pupper", "laikago"]
-MOTIONS = Path(__file__).resolve().parents[2] / "shared" / "motions"
+MOTIONS = Path(__file__).resolve().parents[3] / "shared" / "motions"
 
 
 @pytest.fixture(scope="module", params=NAMES)
