@@ -38,10 +38,11 @@ import zenoh
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "deploy"))   # harness.py: real HAL / server processes
 
 from virl_quad import robots  # noqa: E402
 from virl_quad.deploy import protocol as P  # noqa: E402
-from virl_quad.deploy.harness import Proc, policy_for_tests, wait_until  # noqa: E402
+from harness import Proc, policy_for_tests, wait_until  # noqa: E402
 from virl_quad.deploy.protocol import MsgType  # noqa: E402
 from virl_quad.deploy.zenoh_config import free_port, load_config, publisher_options  # noqa: E402
 

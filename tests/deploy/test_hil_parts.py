@@ -10,7 +10,7 @@ from virl_quad import robots
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy.backends import get_backend
 from virl_quad.deploy.backends.sim import SimBackend
-from virl_quad.deploy.harness import export_untrained
+from hil_harness import export_untrained
 from virl_quad.deploy.protocol import JointCommand, MsgType
 from virl_quad.deploy.serve import PolicyRunner, check_announce
 from virl_quad.policy import ActionMap, policy_observation, yaw

@@ -27,7 +27,7 @@ import pytest
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
-from virl_quad.deploy.harness import Monitor, Proc, export_untrained, policy_for_tests, start_hal, start_server
+from hil_harness import Monitor, Proc, export_untrained, policy_for_tests, start_hal, start_server
 from virl_quad.deploy.protocol import JointCommand
 from virl_quad.deploy.safety import SafetyConfig, is_safe_command, roll_pitch
 from virl_quad.deploy.zenoh_config import free_port, publisher_options
@@ -293,7 +293,7 @@ def test_a_command_naming_a_future_state_does_not_free_run_lock_step(rig_factory
 def _run(module: str, *args: str, timeout: float = 120.0) -> tuple[int, str]:
     import subprocess
 
-    from virl_quad.deploy.harness import ROOT
+    from hil_harness import ROOT
 
     r = subprocess.run([sys.executable, "-m", module, *args], cwd=ROOT, capture_output=True, text=True,
                        timeout=timeout)

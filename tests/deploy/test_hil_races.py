@@ -21,7 +21,7 @@ import zenoh
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
-from virl_quad.deploy.harness import Monitor, start_hal
+from hil_harness import Monitor, start_hal
 from virl_quad.deploy.operator import wait_until
 from virl_quad.deploy.protocol import MsgType
 from virl_quad.deploy.safety import SafetyController

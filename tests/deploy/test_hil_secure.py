@@ -23,7 +23,7 @@ import zenoh
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
-from virl_quad.deploy.harness import Monitor, policy_for_tests, start_hal, start_server
+from hil_harness import Monitor, policy_for_tests, start_hal, start_server
 from virl_quad.deploy.protocol import JointCommand, MsgType
 from virl_quad.deploy.zenoh_config import CONFIG_DIR, free_port, load_config
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
-from virl_quad.deploy.harness import start_hal
+from hil_harness import start_hal
 from virl_quad.deploy.operator import format_status
 from virl_quad.deploy.protocol import JointCommand, RobotState
 from virl_quad.deploy.safety import CLAMPS, Mode, SafetyConfig, SafetyController

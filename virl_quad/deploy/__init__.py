@@ -7,7 +7,6 @@
 - :mod:`virl_quad.deploy.hal`          ``python -m virl_quad.deploy.hal``: robot + safety layer on Zenoh
 - :mod:`virl_quad.deploy.serve`        ``python -m virl_quad.deploy.serve``: TorchScript policy server
 - :mod:`virl_quad.deploy.operator`     ``python -m virl_quad.deploy.operator status|arm|estop``
-- :mod:`virl_quad.deploy.harness`      real-process helpers for hardware-in-the-loop tests and benches
 
 Usage: ``deploy/README.md``.
 

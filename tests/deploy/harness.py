@@ -1,4 +1,5 @@
-"""Process harness for hardware-in-the-loop tests and benches (real processes, real Zenoh).
+"""Process harness for hardware-in-the-loop tests and ``bench/serve_latency.py`` (real processes,
+real Zenoh); loaded by path (``tests/deploy/conftest.py``), not part of the package.
 
 - :func:`start_hal`, :func:`start_server`: ``python -m virl_quad.deploy.hal|serve`` as
   subprocesses, output captured to a file (no pipe can fill up and block them)
