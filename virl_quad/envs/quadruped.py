@@ -33,7 +33,7 @@ from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
 from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
-from virl_quad.sim.world import RobotState, World
+from virl_quad.sim.world import SimState, World
 
 # Nominal measurement noise std (x the episode's obs_noise draw), as legged_gym.
 NOISE_GRAVITY = 0.05   # unit vector components
@@ -140,7 +140,7 @@ class QuadrupedEnv(gym.Env):
         self.demo_step = 0
         self._history: deque = deque(maxlen=8)
         self._next_push = np.inf
-        self._state: RobotState | None = None
+        self._state: SimState | None = None
         self._kin = None
         if cfg.oracle_reward:
             if self.demo is None or self.demo.motion is None:
@@ -199,7 +199,7 @@ class QuadrupedEnv(gym.Env):
         reward = self._oracle_reward(s) if self._kin is not None else 0.0
         return self._observation(), reward, bool(terminated), bool(truncated), self._info()
 
-    def _oracle_reward(self, s: RobotState) -> float:
+    def _oracle_reward(self, s: SimState) -> float:
         """motion_imitation's pose-imitation reward against the reference at the demo clock."""
         from virl_quad.demo.score import Trajectory, reference_trajectory, term_errors, term_rewards
 
@@ -215,13 +215,13 @@ class QuadrupedEnv(gym.Env):
         self.world.push(np.array([v * np.cos(angle), v * np.sin(angle), 0.0]))
         self._next_push += self.rand.push_interval
 
-    def _fallen(self, s: RobotState) -> bool:
+    def _fallen(self, s: SimState) -> bool:
         sp = self.robot
         return bool(s.fall_contact or abs(s.rpy[0]) > sp.max_roll or abs(s.rpy[1]) > sp.max_pitch
                     or s.base_pos[2] < sp.min_base_height)
 
     # -- observation -----------------------------------------------------------------------------
-    def _remember(self, s: RobotState) -> None:
+    def _remember(self, s: SimState) -> None:
         self._history.append((s.time, s.base_quat, s.base_ang_vel_body, s.q, s.dq))
 
     def _delayed(self) -> tuple[np.ndarray, ...]:
@@ -282,7 +282,7 @@ class QuadrupedEnv(gym.Env):
         return self.actions.last_target
 
     @property
-    def state(self) -> RobotState:
+    def state(self) -> SimState:
         """The latest simulator state (ground truth, for evaluation)."""
         return self._state
 

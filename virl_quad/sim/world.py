@@ -30,8 +30,9 @@ GROUND_RENDERERS = ("numpy", "tiny")
 
 
 @dataclass
-class RobotState:
-    """What the simulator knows about the robot at one instant (SI units, canonical joint order)."""
+class SimState:
+    """What the simulator knows about the robot at one instant, privileged parts included (SI units,
+    canonical joint order); the robot-side measurement is :class:`virl_quad.deploy.protocol.RobotState`."""
 
     time: float                    # s since reset
     base_pos: np.ndarray           # m, world (3)
@@ -227,7 +228,7 @@ class World:
         self.bc.resetBaseVelocity(self.robot, list(np.add(v, delta_lin_vel)), list(w))
 
     # -- sensing -----------------------------------------------------------------------------
-    def state(self) -> RobotState:
+    def state(self) -> SimState:
         """Read the agent's full state."""
         bc = self.bc
         pos, quat = bc.getBasePositionAndOrientation(self.robot)
@@ -237,7 +238,7 @@ class World:
         contacts = bc.getContactPoints(bodyA=self.robot, bodyB=self.ground)
         touching = {c[3] for c in contacts}
         lin, ang = np.array(lin), np.array(ang)
-        return RobotState(
+        return SimState(
             time=self.time, base_pos=np.array(pos), base_quat=np.array(quat),
             base_lin_vel=lin, base_ang_vel=ang,
             base_lin_vel_body=rot.T @ lin, base_ang_vel_body=rot.T @ ang,
