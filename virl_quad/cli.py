@@ -2,8 +2,9 @@
 
 - :class:`Parser`: argparse with one-line errors (``error: ...``, exit code 2, no usage
   block) and every option's default in its help; every entry module uses it.
-- :func:`parser_from_dataclass`: a :class:`Parser` whose options are a dataclass's
-  fields and whose help texts are the fields' trailing ``# comments``.
+- :func:`opt`: a dataclass field that carries its command-line help (and choices).
+- :func:`parser_from_dataclass`: a :class:`Parser` with one option per field of such a
+  dataclass (cleanrl's pattern: the dataclass is the CLI and its documentation).
 - :func:`run_main`: run a ``main`` and turn expected failures (bad input) into one
   line on stderr and exit code 2, never a traceback.
 """
@@ -12,24 +13,20 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import inspect
-import re
 import sys
 import typing
+from collections.abc import Sequence
 from typing import Any, Callable
-
-_FIELD = re.compile(r"^\s+(\w+)\s*:\s*[^=#]+(?:=[^#]*)?#\s*(.+?)\s*$")
-
 
 class UserError(Exception):
     """A failure caused by the user's input; shown as one line, exit code 2."""
 
 
 class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
-    """Help texts end with the option's default, unless it is required or has none."""
+    """Help texts end with the option's default, unless it is required or has none (None, "")."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.required or action.default is None:
+        if action.required or action.default is None or action.default == "":
             return action.help
         return super()._get_help_string(action)
 
@@ -48,14 +45,13 @@ class Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def field_comments(cls: type) -> dict[str, str]:
-    """Map each field of dataclass ``cls`` to the comment written after it in the source."""
-    out: dict[str, str] = {}
-    for line in inspect.getsource(cls).splitlines():
-        m = _FIELD.match(line)
-        if m:
-            out[m.group(1)] = m.group(2)
-    return out
+def opt(default: Any, help: str, choices: Sequence[str] | None = None) -> Any:
+    """A dataclass field with default ``default`` whose ``--option`` shows ``help`` (and accepts
+    only ``choices``, when given)."""
+    meta: dict[str, Any] = {"help": help}
+    if choices is not None:
+        meta["choices"] = tuple(choices)
+    return dataclasses.field(default=default, metadata=meta)
 
 
 def _arg_type(tp: Any) -> Callable | None:
@@ -67,10 +63,13 @@ def _arg_type(tp: Any) -> Callable | None:
     return base if base in (int, float, str) else str
 
 
+def _help(f: dataclasses.Field) -> str:
+    return str(f.metadata.get("help", "")).replace("%", "%%")   # argparse formats help with %
+
+
 def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> argparse.ArgumentParser:
     """A :class:`Parser` with one ``--kebab-case`` option per field of dataclass ``cls``."""
     parser = Parser(description=description, **kwargs)
-    helps = {k: v.replace("%", "%%") for k, v in field_comments(cls).items()}  # argparse formats help with %
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
@@ -79,10 +78,10 @@ def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> ar
         choices = f.metadata.get("choices")
         if conv is None:  # bool: --flag / --no-flag
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=helps.get(f.name, ""))
+                                help=_help(f))
         else:
             parser.add_argument(flag, type=conv, default=default, choices=choices, dest=f.name,
-                                help=helps.get(f.name, ""))
+                                help=_help(f))
     return parser
 
 

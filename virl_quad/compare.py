@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.training.config import REWARDS
 
 
@@ -29,17 +29,22 @@ from virl_quad.training.config import REWARDS
 class CompareArgs:
     """Options of ``python -m virl_quad.compare``."""
 
-    robot: str = "pupper"                           # robot to train
-    demo: str = "trot"                              # demonstration (as --demo of virl_quad.train); needs a reference motion for the score
-    rewards: str = "virl,frame,gaifo,oracle,prior"  # comma-separated rewards to compare (see virl_quad.train --reward)
-    minutes: float = 20.0                           # wall-clock budget of each training run
-    episodes: int = 10                              # evaluation episodes per policy (seeds 0..N-1, randomisation on)
-    seconds: float = 10.0                           # s per evaluation episode
-    seed: int = 0                                   # training seed of every run
-    out: str = ""                                   # output folder (default: runs/compare-<robot>-<demo>-<date>)
-    video: bool = True                              # each run writes its side-by-side video
-    train_args: str = ""                            # further options for every training run, written --train-args="--num-envs 32 --eval-every 10"
-    confusion: str = ""                             # instead: comma-separated gaits (e.g. trot,pace,bound), VIRL trained on each video and scored against each reference (see virl_quad.confusion)
+    robot: str = opt("pupper", "robot to train")
+    demo: str = opt("trot",
+        "demonstration (as --demo of virl_quad.train); needs a reference motion for the score")
+    rewards: str = opt("virl,frame,gaifo,oracle,prior",
+        "comma-separated rewards to compare (see virl_quad.train --reward)")
+    minutes: float = opt(20.0, "wall-clock budget of each training run")
+    episodes: int = opt(10, "evaluation episodes per policy (seeds 0..N-1, randomisation on)")
+    seconds: float = opt(10.0, "s per evaluation episode")
+    seed: int = opt(0, "training seed of every run")
+    out: str = opt("", "output folder (empty: runs/compare-<robot>-<demo>-<date>, or runs/confusion-<robot>-<date>)")
+    video: bool = opt(True, "each run writes its side-by-side video")
+    train_args: str = opt("",
+        "further options for every training run, written --train-args=\"--num-envs 32 --eval-every 10\"")
+    confusion: str = opt("",
+        "instead: comma-separated gaits (e.g. trot,pace,bound), VIRL trained on each video and scored "
+        "against each reference (see virl_quad.confusion)")
 
 
 def parse_rewards(text: str) -> list[str]:

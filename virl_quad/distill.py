@@ -47,7 +47,7 @@ from tensordict import TensorDict
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
-from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.demo.tracker import DEFAULT_GAIN, DEFAULT_LEAD, tracker_action
 from virl_quad.policy.observation import policy_block
 
@@ -56,23 +56,27 @@ from virl_quad.policy.observation import policy_block
 class DistillArgs:
     """Options of ``python -m virl_quad.distill`` (field comments are the CLI help)."""
 
-    robot: str = "pupper"                   # robot name (pupper, laikago)
-    demo: str = "trot"                      # built-in gait or motion file (it needs a reference motion)
-    out: str = ""                           # exported policy NAME.pt; default policies/<robot>_<demo>_tracker_bc.pt
-    rounds: int = 6                         # DAgger rounds (round 0: the tracker drives)
-    steps: int = 5000                       # control steps gathered per round
-    epochs: int = 100                       # passes over the data per refit (cosine learning-rate decay)
-    lr: float = 1e-3                        # Adam learning rate
-    batch: int = 512                        # minibatch size
-    hidden: str = "256,128"                 # hidden layer sizes (the training default)
-    gain: float = DEFAULT_GAIN              # tracker feedback gain on the joint error
-    lead: float = DEFAULT_LEAD              # s the tracker's feed-forward reference runs ahead
-    blind_last_action: bool = True          # the student ignores the last-action input (no copying the teacher's last action)
-    noise: float = 0.1                      # std of Gaussian noise on the executed action (action units): wider states, fewer falls
-    randomize: bool = False                 # domain randomisation while gathering (off: the nominal robot, as the sim HAL)
-    max_latency: float | None = None        # s, largest observation delay drawn with --randomize (default: the robot's own range)
-    seed: int = 0                           # random seed
-    quiet: bool = False                     # no progress lines
+    robot: str = opt("pupper", "robot name (pupper, laikago)")
+    demo: str = opt("trot", "built-in gait or motion file (it needs a reference motion)")
+    out: str = opt("", "exported policy NAME.pt; default policies/<robot>_<demo>_tracker_bc.pt")
+    rounds: int = opt(6, "DAgger rounds (round 0: the tracker drives)")
+    steps: int = opt(5000, "control steps gathered per round")
+    epochs: int = opt(100, "passes over the data per refit (cosine learning-rate decay)")
+    lr: float = opt(1e-3, "Adam learning rate")
+    batch: int = opt(512, "minibatch size")
+    hidden: str = opt("256,128", "hidden layer sizes (the training default)")
+    gain: float = opt(DEFAULT_GAIN, "tracker feedback gain on the joint error")
+    lead: float = opt(DEFAULT_LEAD, "s the tracker's feed-forward reference runs ahead")
+    blind_last_action: bool = opt(True,
+        "the student ignores the last-action input (no copying the teacher's last action)")
+    noise: float = opt(0.1,
+        "std of Gaussian noise on the executed action (action units): wider states, fewer falls")
+    randomize: bool = opt(False,
+        "domain randomisation while gathering (off: the nominal robot, as the sim HAL)")
+    max_latency: float | None = opt(None,
+        "s, largest observation delay drawn with --randomize (unset: the robot's own range)")
+    seed: int = opt(0, "random seed")
+    quiet: bool = opt(False, "no progress lines")
 
 
 def _episode_options(k: int) -> dict | None:

@@ -7,8 +7,9 @@ distance model to a GPU when there is one (the simulation stays on the CPU).
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from virl_quad.cli import opt
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 
 REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
@@ -21,44 +22,86 @@ PRIOR_SOURCES = ("video", "motion")
 class TrainArgs:
     """Options of ``python -m virl_quad.train``."""
 
-    robot: str = "pupper"              # robot to train (pupper or laikago)
-    demo: str = "trot"                 # demonstration: built-in gait name, .npz, motion file (.txt/.json) or video file
-    reward: str = field(default="virl", metadata={"choices": REWARDS})  # reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, oracle (ground-truth pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and warm start give alone)
-    num_envs: int = 16                 # parallel simulated robots
-    num_workers: int = -1              # env worker processes (-1: one per CPU core)
-    iterations: int = 1000             # PPO iterations the run ends at, in total: on --resume the ones already done count (an upper bound when --minutes is given)
-    minutes: float = 18.0              # wall-clock budget in minutes from the start of the command to the end of training (prior fit, warm start and PPO; 0: none, run all iterations); the final evaluation, export and video follow, so the default main job takes about 20 minutes on 2 cores
-    steps_per_env: int = 64            # env steps per env per iteration (rollout length)
-    seed: int = 0                      # seed of envs, networks and sampling
-    device: str = "cpu"                # torch device of PPO and the distance model (cpu or cuda)
-    run_dir: str = ""                  # output folder (default: runs/<robot>-<reward>-<date>)
-    resume: str = ""                   # run folder to continue from its latest checkpoint
-    save_every: int = 10               # write a checkpoint every N iterations
-    eval_every: int = 25               # ground-truth evaluation every N iterations (0: only at the end)
-    eval_episodes: int = 2             # episodes per evaluation (fixed seeds)
-    eval_seconds: float = 10.0         # s, length of an evaluation episode
-    episode_seconds: float = 10.0      # s, training episode time limit
-    randomize: bool = True             # domain randomisation during training
-    reward_updates: int = 2            # distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)
-    reward_lr: float = 1e-3            # distance-model Adam learning rate
-    reward_wd: float = -5.0            # w_d in r = exp(w_d * d^2) (paper: -5)
-    reward_median: float = 0.0         # a learned reward's rollout is raised to the power that lifts its median to this when it is lower: the same order of behaviours, but a scale that does not sink towards 0 (and take the reason to stay up with it) as the distance model tells the agent from the expert; 0: the paper's reward as is
-    other_demos: str = "auto"          # multi-task clips for the distance model (negatives of another class): "auto" = the other built-in gaits when --demo is one, "none", or comma-separated demo sources
-    ground: str = field(default=DEFAULT_GROUND, metadata={"choices": GROUNDS})  # ground the camera sees in demonstration renders and agent frames: checker (forward progress visible to a person) or plain; the distance model paints either white (RewardConfig.paint_background)
-    adversarial_weight: float = 0.1    # sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves every behaviour rewarded alike
-    learning_rate: float = 3e-4        # PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started policy is kept close to where it starts
-    critic_learning_rate: float = 1e-3  # fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl
-    entropy_coef: float = 0.005        # PPO entropy bonus
-    init_std: float = 0.05             # initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)
-    hidden: str = "256,128"            # actor/critic MLP hidden sizes, comma separated
-    video: bool = True                 # write the final side-by-side video (demonstration | agent)
-    warm_start_rounds: int = 4         # with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before PPO (0: start PPO from a fresh actor)
-    warm_start_steps: int = 4000       # control steps gathered per warm-start round
-    critic_warmup: int = 10            # iterations at the start of a run that fit the critic alone (actor frozen): PPO's first advantages come from a critic that knows the warm-started policy
-    symmetry: bool = False             # rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg: the mirror shifts the gait clock by the TG's leg offsets)
-    alignment_probe: bool = True       # with a learned reward: at every evaluation, the rank correlation of the reward with the ground-truth score over a fixed graded set of rollouts (tracker variants, standing, other gaits, random; recorded once at the start), logged beside the score
-    prior_from: str = field(default="video", metadata={"choices": PRIOR_SOURCES})  # where the trajectory generator's parameters come from: video (fitted to the demonstration's frames by rendering candidate gaits and keeping the closest, the video alone) or motion (least squares on the demonstration's reference motion, else the built-in gait of its name)
-    tg: bool = True                    # the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency and amplitude modulation; its parameters: see --prior-from); off: joint offsets from the default pose
+    robot: str = opt("pupper", "robot to train (pupper or laikago)")
+    demo: str = opt("trot", "demonstration: built-in gait name, .npz, motion file (.txt/.json) or video file")
+    reward: str = opt("virl",
+        "reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, oracle (ground-truth "
+        "pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and "
+        "warm start give alone)", choices=REWARDS)
+    num_envs: int = opt(16, "parallel simulated robots")
+    num_workers: int = opt(-1, "env worker processes (-1: one per CPU core)")
+    iterations: int = opt(1000,
+        "PPO iterations the run ends at, in total: on --resume the ones already done count (an upper "
+        "bound when --minutes is given)")
+    minutes: float = opt(18.0,
+        "wall-clock budget in minutes from the start of the command to the end of training (prior fit, "
+        "warm start and PPO; 0: none, run all iterations); the final evaluation, export and video follow,"
+        " so the default main job takes about 20 minutes on 2 cores")
+    steps_per_env: int = opt(64, "env steps per env per iteration (rollout length)")
+    seed: int = opt(0, "seed of envs, networks and sampling")
+    device: str = opt("cpu", "torch device of PPO and the distance model (cpu or cuda)")
+    run_dir: str = opt("", "output folder (empty: runs/<robot>-<reward>-<date>)")
+    resume: str = opt("", "run folder to continue from its latest checkpoint")
+    save_every: int = opt(10, "write a checkpoint every N iterations")
+    eval_every: int = opt(25, "ground-truth evaluation every N iterations (0: only at the end)")
+    eval_episodes: int = opt(2, "episodes per evaluation (fixed seeds)")
+    eval_seconds: float = opt(10.0, "s, length of an evaluation episode")
+    episode_seconds: float = opt(10.0, "s, training episode time limit")
+    randomize: bool = opt(True, "domain randomisation during training")
+    reward_updates: int = opt(2,
+        "distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)")
+    reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
+    reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
+    reward_median: float = opt(0.0,
+        "a learned reward's rollout is raised to the power that lifts its median to this when it is "
+        "lower: the same order of behaviours, but a scale that does not sink towards 0 (and take the "
+        "reason to stay up with it) as the distance model tells the agent from the expert; 0: the paper's"
+        " reward as is")
+    other_demos: str = opt("auto",
+        "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
+        "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")
+    ground: str = opt(DEFAULT_GROUND,
+        "ground the camera sees in demonstration renders and agent frames: checker (forward progress "
+        "visible to a person) or plain; the distance model paints either white "
+        "(RewardConfig.paint_background)", choices=GROUNDS)
+    adversarial_weight: float = opt(0.1,
+        "sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): "
+        "higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves "
+        "every behaviour rewarded alike")
+    learning_rate: float = opt(3e-4,
+        "PPO Adam learning rate at the start (then adaptive on a KL target of 0.01): a warm-started "
+        "policy is kept close to where it starts")
+    critic_learning_rate: float = opt(1e-3,
+        "fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 "
+        "it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl")
+    entropy_coef: float = opt(0.005, "PPO entropy bonus")
+    init_std: float = opt(0.05,
+        "initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint "
+        "residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)")
+    hidden: str = opt("256,128", "actor/critic MLP hidden sizes, comma separated")
+    video: bool = opt(True, "write the final side-by-side video (demonstration | agent)")
+    warm_start_rounds: int = opt(4,
+        "with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before "
+        "PPO (0: start PPO from a fresh actor)")
+    warm_start_steps: int = opt(4000, "control steps gathered per warm-start round")
+    critic_warmup: int = opt(10,
+        "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
+        "advantages come from a critic that knows the warm-started policy")
+    symmetry: bool = opt(False,
+        "rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg:"
+        " the mirror shifts the gait clock by the TG's leg offsets)")
+    alignment_probe: bool = opt(True,
+        "with a learned reward: at every evaluation, the rank correlation of the reward with the "
+        "ground-truth score over a fixed graded set of rollouts (tracker variants, standing, other gaits,"
+        " random; recorded once at the start), logged beside the score")
+    prior_from: str = opt("video",
+        "where the trajectory generator's parameters come from: video (fitted to the demonstration's "
+        "frames by rendering candidate gaits and keeping the closest, the video alone) or motion (least "
+        "squares on the demonstration's reference motion, else the built-in gait of its name)", choices=PRIOR_SOURCES)
+    tg: bool = opt(True,
+        "the policy acts as a residual on a trajectory generator (PMTG: 12 joint residuals + frequency "
+        "and amplitude modulation; its parameters: see --prior-from); off: joint offsets from the default"
+        " pose")
 
 
 def validate(args: TrainArgs) -> None:
