@@ -31,6 +31,9 @@ def test_tiny_comparison_writes_table_and_plots(tmp_path: Path) -> None:
     assert (out / "curves.png").stat().st_size > 1000 and (out / "scores.png").stat().st_size > 1000
     for name in ("oracle", "prior"):                     # each run trained with its own reward
         assert json.loads((out / name / "config.json").read_text())["reward"] == name
+    again = run("--rewards", "oracle,prior", "--minutes", "1", "--episodes", "1", "--seconds", "0.5", "--no-video",
+                "--out", str(out), TINY_TRAIN)            # an interrupted comparison resumes: finished runs reused
+    assert again.returncode == 0 and again.stdout.count("reusing the finished run") == 2, again.stdout[-2000:]
 
 
 def test_unknown_reward_is_one_error_line(tmp_path: Path) -> None:

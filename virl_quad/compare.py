@@ -9,7 +9,8 @@ randomisation on) beside holding the default pose. ``prior`` trains the gait pri
 start with a survival reward only: a learned reward that does not beat it adds nothing.
 Writes into ``--out``: ``results.md`` and ``results.json`` (the table), ``curves.png`` (score
 against env steps and wall time, from each run's evaluations), ``scores.png`` (a bar chart),
-and each run's folder with its policy and side-by-side video (demonstration | agent).
+and each run's folder with its policy and side-by-side video (demonstration | agent). A finished
+run already in ``--out`` is reused, so an interrupted comparison picks up where it stopped.
 """
 
 from __future__ import annotations
@@ -166,15 +167,19 @@ def main(args: CompareArgs) -> int:
         return run_confusion(args, Path(args.out or f"runs/confusion-{args.robot}-{time.strftime('%Y%m%d-%H%M%S')}"))
     rewards = parse_rewards(args.rewards)
     out = Path(args.out or f"runs/compare-{args.robot}-{Path(args.demo).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
-    if any((out / r / "checkpoint.pt").exists() for r in rewards):
-        raise UserError(f"{out} already holds runs of this comparison: give another --out")
+    for r in rewards:
+        if (out / r / "checkpoint.pt").exists() and not (out / r / "report.json").exists():
+            raise UserError(f"{out / r} holds an unfinished run: resume it with virl_quad.train or give another --out")
     out.mkdir(parents=True, exist_ok=True)
     print(f"comparing {', '.join(rewards)} on {args.robot} {args.demo}, {args.minutes:g} min each; "
           f"results in {out}", flush=True)
     results: dict[str, dict] = {}
     for reward in rewards:
         try:
-            train_one(args, reward, out / reward)
+            if (out / reward / "report.json").exists():      # an interrupted comparison picks up here
+                print(f"[{reward}] reusing the finished run in {out / reward}", flush=True)
+            else:
+                train_one(args, reward, out / reward)
             results[reward] = evaluate_run(args, out / reward)
             r = results[reward]
             print(f"[{reward}] score {r['total']:.3f}, survival {r['survival_fraction']:.2f}, "
