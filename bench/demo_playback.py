@@ -21,7 +21,7 @@ import numpy as np
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
-from virl_quad.demo.score import Trajectory, score_trajectory
+from virl_quad.evaluation.score import Trajectory, score_trajectory
 from virl_quad.kinematics import Kinematics
 
 AIR = 0.01  # m above the foot radius: "in the air"

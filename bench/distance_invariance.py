@@ -10,7 +10,7 @@ distance d and reward exp(w_d d^2) between the run's demonstration and:
   at another phase; on the default plain ground these rows measure d ~0 by construction),
   the camera turned or moved back a little;
 - a good imitation done with physics: the simulated robot (no randomisation) following the
-  reference with ``virl_quad.demo.tracker`` (ground-truth score about 0.7, 1.6x standing);
+  reference with ``virl_quad.evaluation.tracker`` (ground-truth score about 0.7, 1.6x standing);
 - real motion differences: the robot standing in its default pose (simulated, no
   randomisation) and the run's multi-task clips (other gaits).
 
@@ -31,7 +31,7 @@ import torch
 
 from virl_quad import envs, robots
 from virl_quad.demo.render import render_demonstration
-from virl_quad.demo.tracker import tracker_action
+from virl_quad.evaluation.tracker import tracker_action
 from virl_quad.sim.camera import CameraParams
 from virl_quad.sim.params import DEFAULT_GROUND
 from virl_quad.training import checkpoint

@@ -90,7 +90,7 @@ class FrameSource:
         key = (gait, swing_height)
         if key not in self._motions:
             if self.kind in ("demo", "auto"):
-                from virl_quad.demo.gaits import gait_motion
+                from virl_quad.motion.gaits import gait_motion
 
                 kw = {} if swing_height is None else {"swing_height": swing_height}
                 self._motions[key] = gait_motion(ROBOT, gait, **kw)

@@ -54,7 +54,7 @@ def prior_only(robot: str, demo_name: str, episodes: int) -> dict:
     """The TG with zero residual, evaluated as training evaluates."""
     from virl_quad import demo as demo_lib
     from virl_quad import robots
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
     from virl_quad.training.prior import tg_for_demo
 
     demo = demo_lib.load(demo_name, robot)

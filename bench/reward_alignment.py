@@ -4,7 +4,7 @@
     python bench/reward_alignment.py --fresh [--variant virl] [--adversarial-weight 1] [--updates 600]
 
 Rollouts of the simulated robot (physics, the training environment) from controllers of
-graded quality, all built on the privileged tracker of ``virl_quad.demo.tracker``:
+graded quality, all built on the privileged tracker of ``virl_quad.evaluation.tracker``:
 the tracker itself, its actions scaled towards the default pose (``alpha``), with
 action noise, half a cycle late, tracking another built-in gait, plus standing still
 and random actions. For each rollout: the run's learned reward exp(w_d d^2) between
@@ -40,7 +40,7 @@ from virl_quad.training.alignment import alignment, controllers, record, rollout
 
 def fresh_model(a: argparse.Namespace):
     """A distance model trained here (see the module doc); (model, demo, robot)."""
-    from virl_quad.demo.gaits import GAIT_NAMES
+    from virl_quad.motion.gaits import GAIT_NAMES
 
     robot, gait = a.robot, a.demo
     demo = demo_lib.load(gait, robot, ground=a.ground)

@@ -5,7 +5,7 @@
 For each demonstration: the TG's parameters (``virl_quad.training.prior.tg_for_demo``: fitted
 to the reference motion, else the built-in gait of its name) and the fit's RMS foot error,
 then the TG with zero residual and no modulation (a policy that outputs 14 zeros) scored
-with the ground-truth imitation score (``virl_quad.demo.score.evaluate``, the figures of
+with the ground-truth imitation score (``virl_quad.evaluation.rollout.evaluate``, the figures of
 ``python -m virl_quad.evaluate``) on the nominal robot and under domain randomisation,
 beside holding the default pose: the prior-only baseline a residual policy starts from.
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 from virl_quad import demo as demo_lib
 from virl_quad import robots
-from virl_quad.demo.score import evaluate
+from virl_quad.evaluation.rollout import evaluate
 from virl_quad.training.prior import tg_for_demo
 
 

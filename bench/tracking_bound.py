@@ -3,7 +3,7 @@
     python bench/tracking_bound.py [--robot pupper] [--demo trot] [--episodes 3] [--gains 0,1,3,6]
 
 A learned policy sees only proprioception; this controller cheats
-(``virl_quad.demo.tracker``): every control step it reads the reference joint angles
+(``virl_quad.evaluation.tracker``): every control step it reads the reference joint angles
 q_ref at the demonstration clock and commands, through the environment's own action
 space (scale, clip, rate limit, PD gains, torque limits),
 
@@ -27,8 +27,9 @@ import numpy as np
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
-from virl_quad.demo.score import TERMS, record_episode, score_trajectory
-from virl_quad.demo.tracker import DEFAULT_LEAD, tracker_action
+from virl_quad.evaluation.rollout import record_episode
+from virl_quad.evaluation.score import TERMS, score_trajectory
+from virl_quad.evaluation.tracker import DEFAULT_LEAD, tracker_action
 from virl_quad.kinematics import Kinematics
 from virl_quad.policy.observation import policy_block
 

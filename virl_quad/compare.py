@@ -79,7 +79,7 @@ def train_one(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> 
 def evaluate_run(args: CompareArgs, run_dir: Path) -> dict:
     """Export the run's policy and score it: the evaluation's figures plus iterations and env steps."""
     from virl_quad import demo as demo_lib
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
     from virl_quad.evaluate import policy_callable
     from virl_quad.export import export
     from virl_quad.policy_io import load_policy
@@ -98,7 +98,7 @@ def evaluate_run(args: CompareArgs, run_dir: Path) -> dict:
 def standing_score(args: CompareArgs, demo_path: Path) -> dict:
     """Holding the default pose, evaluated as the policies are."""
     from virl_quad import demo as demo_lib
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
     from virl_quad.evaluate import zero_policy
 
     demo = demo_lib.load(str(demo_path), args.robot)

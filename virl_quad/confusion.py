@@ -43,7 +43,7 @@ def parse_gaits(text: str, robot: str) -> list[str]:
 
 def record(policy, robot: str, demo, episodes: int, seconds: float) -> list[tuple]:
     """``episodes`` seeded, randomised episodes of ``policy`` in ``demo``'s env: (trajectory, times) each."""
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
     from virl_quad.evaluate import policy_callable
 
     rollouts: list[tuple] = []
@@ -54,7 +54,7 @@ def record(policy, robot: str, demo, episodes: int, seconds: float) -> list[tupl
 
 def score_against(rollouts: list[tuple], motion, robot: str, kin) -> float:
     """Ground-truth total at the best phase shift of ``motion``, averaged over steps of all rollouts."""
-    from virl_quad.demo.score import score_trajectory
+    from virl_quad.evaluation.score import score_trajectory
 
     totals = [score_trajectory(traj, motion, times, robot, kin=kin)["total_best_offset"] for traj, times in rollouts]
     return float(np.average(totals, weights=[len(traj) for traj, _ in rollouts]))

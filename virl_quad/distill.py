@@ -2,7 +2,7 @@
 
     python -m virl_quad.distill --robot pupper --out policies/pupper_trot_tracker_bc.pt
 
-NOT the VIRL method: the teacher (:mod:`virl_quad.demo.tracker`) reads the reference joint
+NOT the VIRL method: the teacher (:mod:`virl_quad.evaluation.tracker`) reads the reference joint
 angles of the demonstration, which a video does not have. What it gives is a policy of the
 training architecture, on the training observation (the one builder), exported in the
 training format, that walks: a yardstick for what a proprioceptive MLP can do on this
@@ -48,7 +48,7 @@ from tensordict import TensorDict
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
 from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
-from virl_quad.demo.tracker import DEFAULT_GAIN, DEFAULT_LEAD, tracker_action
+from virl_quad.evaluation.tracker import DEFAULT_GAIN, DEFAULT_LEAD, tracker_action
 from virl_quad.policy.observation import policy_block
 
 

@@ -34,7 +34,7 @@ def zero_policy(obs: dict) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
     from virl_quad import demo as demo_lib
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
 
     parser = Parser(prog="python -m virl_quad.evaluate", description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", required=True, help="exported policy (.pt with its .json beside it)")

@@ -105,7 +105,7 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
         with np.load(saved) as f:
             return [f[k] for k in sorted(f.files)]
     from virl_quad import demo as demo_lib
-    from virl_quad.demo.gaits import GAIT_NAMES
+    from virl_quad.motion.gaits import GAIT_NAMES
 
     choice = args.other_demos.strip()
     gait = args.demo.removeprefix("gait:")
@@ -308,7 +308,7 @@ def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dic
     """The run's ground-truth evaluation of ``policy`` (obs dict -> action); ``actions``: the env
     options of its action space (the run's contract; None: the defaults, 12 offsets from the
     default pose)."""
-    from virl_quad.demo.score import evaluate
+    from virl_quad.evaluation.rollout import evaluate
 
     return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
                     episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground,

@@ -1,40 +1,8 @@
-"""Shared fixtures for the demonstration tests (pytest runs with --import-mode=importlib, so
-test modules cannot import each other: helpers live in fixtures here)."""
+"""Every test here renders into the session's private cache, not the user's."""
 
-from __future__ import annotations
-
-from pathlib import Path
-
-import numpy as np
 import pytest
-
-#: ../shared/motions next to the repository root (absent in a user's fresh checkout).
-SHARED_MOTIONS = Path(__file__).resolve().parents[2].parent / "shared" / "motions"
-
-
-@pytest.fixture(scope="session")
-def motions_dir() -> Path:
-    """The shared motion clips folder; skips the test when it is absent."""
-    if not SHARED_MOTIONS.is_dir() or not any(SHARED_MOTIONS.glob("*.txt")):
-        pytest.skip(f"shared motions folder not found: {SHARED_MOTIONS}")
-    return SHARED_MOTIONS
 
 
 @pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    """Keep built-in gait renders out of the user's cache: one cache folder per test session."""
-    monkeypatch.setenv("VIRL_QUAD_CACHE", str(tmp_path_factory.getbasetemp() / "virl_quad_cache"))
-
-
-@pytest.fixture(scope="session")
-def gait_motions():
-    """Built-in gait motions of both robots, {(robot, gait): Motion}, generated once."""
-    from virl_quad.demo.gaits import GAIT_NAMES, gait_motion
-
-    return {(r, g): gait_motion(r, g) for r in ("pupper", "laikago") for g in GAIT_NAMES}
-
-
-@pytest.fixture(scope="session")
-def mae():
-    """Mean absolute difference of two uint8 image stacks, in gray levels."""
-    return lambda a, b: float(np.mean(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+def _private_cache(private_cache) -> None:
+    """See :func:`tests.conftest.private_cache`."""

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo import gaits, render, sheet
+from virl_quad.demo import render, sheet
+from virl_quad.motion import gaits
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.sim.world import World
 
@@ -54,7 +55,7 @@ def test_frames_match_the_environment_camera(gait_motions):
 
 
 def test_loop_fit_and_duration(gait_motions):
-    from virl_quad.demo.motion_io import read_laikago_recording
+    from virl_quad.motion.motion_io import read_laikago_recording
 
     m = render.fit_loop(gait_motions[("laikago", "trot")], 50.0)    # 0.51 s cycle -> 25 or 26 frames at 50 Hz
     assert (m.duration * 50.0) == pytest.approx(round(m.duration * 50.0), abs=1e-9)

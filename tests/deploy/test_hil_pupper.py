@@ -158,7 +158,7 @@ def _env_run(path) -> tuple[float, bool]:
     standing in the default pose at demonstration phase 0, no randomisation."""
     from virl_quad import demo as demo_lib
     from virl_quad import envs
-    from virl_quad.demo.score import record_episode
+    from virl_quad.evaluation.rollout import record_episode
     from virl_quad.policy_io import load_policy
 
     policy = load_policy(path)

@@ -87,7 +87,7 @@ def test_bad_input() -> None:
 
 def test_a_trajectory_generator_takes_14_actions() -> None:
     from virl_quad import robots
-    from virl_quad.demo.gaits import gait_params
+    from virl_quad.motion.gaits import gait_params
     from virl_quad.training.prior import gait_tg
 
     tg = gait_tg(robots.get("pupper"), gait_params("pupper", "trot"))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo.gaits import gait_params
+from virl_quad.motion.gaits import gait_params
 from virl_quad.policy import ActionMap, PhaseClock, PolicyContract, TrajectoryGenerator
 from virl_quad.training.prior import gait_tg
 

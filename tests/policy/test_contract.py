@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo.gaits import gait_params
+from virl_quad.motion.gaits import gait_params
 from virl_quad.export import default_contract, export_actor, fresh_actor
 from virl_quad.policy import PolicyContract
 from virl_quad.policy_io import load_policy

@@ -14,7 +14,7 @@ import pytest
 
 from virl_quad import demo as demo_lib
 from virl_quad import envs, robots
-from virl_quad.demo.gaits import gait_params
+from virl_quad.motion.gaits import gait_params
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy.serve import PolicyRunner
 from virl_quad.export import export_actor, fresh_actor

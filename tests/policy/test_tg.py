@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo.gaits import gait_motion, gait_params
+from virl_quad.motion.gaits import gait_motion, gait_params
 from virl_quad.kinematics import Kinematics
 from virl_quad.policy.legs import LegKinematics
 from virl_quad.policy.tg import AMPLITUDE_SCALE_RANGE, FREQUENCY_SCALE_RANGE, TGParams, TrajectoryGenerator, modulation

@@ -9,8 +9,8 @@ import pytest
 
 from virl_quad import demo as demo_lib
 from virl_quad import robots
-from virl_quad.demo.gaits import gait_motion, gait_params
-from virl_quad.demo.motion import Motion
+from virl_quad.motion.gaits import gait_motion, gait_params
+from virl_quad.motion.motion import Motion
 from virl_quad.policy import TrajectoryGenerator
 from virl_quad.training.prior import fit_tg, gait_tg, tg_for_demo
 

@@ -97,7 +97,7 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     """--tg: the policy is a residual on the trajectory generator fitted to the demonstration video; the
     run, its resume, its export and the policy server all use that TG (14 actions)."""
     from virl_quad import robots
-    from virl_quad.demo.gaits import gait_params
+    from virl_quad.motion.gaits import gait_params
     from virl_quad.deploy import protocol as P
     from virl_quad.deploy.serve import PolicyRunner
     from virl_quad.training.prior import gait_tg

@@ -11,7 +11,7 @@ import pytest
 
 from virl_quad import demo as demo_lib
 from virl_quad import robots
-from virl_quad.demo.gaits import PHASE_OFFSETS
+from virl_quad.motion.gaits import PHASE_OFFSETS
 from virl_quad.training.video_prior import (fit_tg_to_video, gait_period, relative_offsets, same_pattern,
                                             silhouettes)
 

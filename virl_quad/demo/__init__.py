@@ -1,4 +1,4 @@
-"""Demonstrations: built-in gaits, motion files, retargeting, rendering, video import, scoring.
+"""Demonstrations: the video a robot learns from, rendered from a motion or imported from a file.
 
 ``load(source, robot) -> Demonstration`` is the one entry point the trainer needs:
 
@@ -8,10 +8,10 @@
 >>> d = demo.load("clip.mp4", "laikago")     # any video, imported to 48x48 at the control rate
 >>> d = demo.load("demo.npz", "pupper")      # a saved demonstration
 
-Modules: ``motion`` (reference motion model), ``motion_io`` (motion files), ``gaits``
-(built-in gaits by IK), ``retarget`` (motion onto another robot), ``render`` (demo videos,
-``.npz``), ``video_import`` (any video), ``contacts`` (ground-contact check), ``score``
-(ground-truth imitation score), ``sheet`` (contact sheet PNG). CLI: ``python -m virl_quad.demo``.
+Modules: ``demonstration`` (the ``Demonstration`` the env consumes), ``render`` (demo videos of a
+motion, ``.npz``), ``video_import`` (any video), ``sheet`` (contact sheet PNG), ``checks`` (video
+round trip). The motions themselves live in :mod:`virl_quad.motion`, the ground-truth score in
+:mod:`virl_quad.evaluation`. CLI: ``python -m virl_quad.demo``.
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ from virl_quad.demo.demonstration import Demonstration, MotionLike, MotionState
 from virl_quad.sim.params import DEFAULT_GROUND
 
 if TYPE_CHECKING:
-    from virl_quad.demo.motion import Motion
+    from virl_quad.motion.motion import Motion
 
 # The heavier modules (scipy, OpenCV, PyBullet, Pinocchio) load on first use: the environment
 # imports this package for the Demonstration class alone.
 _LAZY = {
-    "Motion": "virl_quad.demo.motion", "GAIT_NAMES": "virl_quad.demo.gaits",
-    "DEFAULT_GAIT": "virl_quad.demo.gaits", "load_npz": "virl_quad.demo.render",
-    "save_npz": "virl_quad.demo.render", "evaluate": "virl_quad.demo.score",
+    "Motion": "virl_quad.motion.motion", "GAIT_NAMES": "virl_quad.motion.gaits",
+    "DEFAULT_GAIT": "virl_quad.motion.gaits", "load_npz": "virl_quad.demo.render",
+    "save_npz": "virl_quad.demo.render",
 }
 
 #: Bump when gait parameters or rendering change, so cached renders are rebuilt.
@@ -63,7 +63,7 @@ def cache_dir() -> Path:
 
 
 def _bad_source(source: str) -> ValueError:
-    from virl_quad.demo.gaits import GAIT_NAMES
+    from virl_quad.motion.gaits import GAIT_NAMES
 
     return ValueError(f"cannot use {source!r} as a demonstration: give a built-in gait "
                       f"({', '.join(GAIT_NAMES)}), a .npz demonstration, a motion file (.txt/.json) "
@@ -75,7 +75,7 @@ def _cache_key(robot: str, gait: str) -> str:
     import dataclasses
     import hashlib
 
-    from virl_quad.demo.gaits import gait_params
+    from virl_quad.motion.gaits import gait_params
 
     spec = robots.get(robot)
     h = hashlib.sha1(repr((CACHE_VERSION, gait_params(robot, gait), dataclasses.astuple(spec))).encode())
@@ -88,7 +88,7 @@ def _cache_key(robot: str, gait: str) -> str:
 
 def gait_demonstration(gait: str, robot: str, use_cache: bool = True, ground: str = DEFAULT_GROUND) -> Demonstration:
     """The rendered demonstration of built-in ``gait`` on ``robot`` and ``ground``, cached under :func:`cache_dir`."""
-    from virl_quad.demo.gaits import gait_motion
+    from virl_quad.motion.gaits import gait_motion
     from virl_quad.demo.render import load_npz, render_demonstration, save_npz
 
     path = cache_dir() / f"{robot}_{gait}_{ground}_{CACHE_VERSION}_{_cache_key(robot, gait)}.npz"
@@ -109,7 +109,7 @@ def gait_demonstration(gait: str, robot: str, use_cache: bool = True, ground: st
 def motion_demonstration(motion: Motion, robot: str, source: str = "", ground: str = DEFAULT_GROUND) -> Demonstration:
     """Render a motion on ``robot``, retargeting it first when it belongs to another robot."""
     from virl_quad.demo.render import render_demonstration
-    from virl_quad.demo.retarget import retarget
+    from virl_quad.motion.retarget import retarget
 
     if motion.robot and motion.robot != robot:
         motion = retarget(motion, robot)
@@ -140,7 +140,7 @@ def load(source: str | os.PathLike, robot: str, ground: str = DEFAULT_GROUND) ->
     "plain"; a ``.npz`` or a video is what it is). Raises FileNotFoundError for a missing file and a
     one-line ValueError for anything else that cannot be used (naming the valid gait names).
     """
-    from virl_quad.demo.gaits import GAIT_NAMES
+    from virl_quad.motion.gaits import GAIT_NAMES
     from virl_quad.demo.render import load_npz
 
     robots.get(robot)
@@ -157,7 +157,7 @@ def load(source: str | os.PathLike, robot: str, ground: str = DEFAULT_GROUND) ->
     if suffix == ".npz":
         return _for_robot(load_npz(path), robot)
     if suffix in MOTION_SUFFIXES:
-        from virl_quad.demo.motion_io import read_motion
+        from virl_quad.motion.motion_io import read_motion
 
         return motion_demonstration(read_motion(path), robot, source=str(path), ground=ground)
     from virl_quad.demo.video_import import import_video

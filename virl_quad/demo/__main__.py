@@ -45,7 +45,8 @@ def _describe(d) -> str:
 
 def cmd_render(a: argparse.Namespace) -> None:
     """Render a built-in gait or a motion file to ``.npz`` (and optionally ``.mp4``)."""
-    from virl_quad.demo import gaits, motion_io, render, retarget
+    from virl_quad.demo import render
+    from virl_quad.motion import gaits, motion_io, retarget
 
     robots.get(a.robot)
     if a.motion:
@@ -80,7 +81,7 @@ def cmd_show(a: argparse.Namespace) -> None:
 
 def cmd_contacts(a: argparse.Namespace) -> None:
     """Print the ground-contact table of every clip in a folder, on both robots."""
-    from virl_quad.demo import contacts
+    from virl_quad.motion import contacts
 
     rows = contacts.contact_table(a.dir, tuple(a.robots))
     print(contacts.format_table(rows))
@@ -90,7 +91,8 @@ def cmd_contacts(a: argparse.Namespace) -> None:
 
 def cmd_score(a: argparse.Namespace) -> None:
     """Self-check of the score on a gait: playback (1.0), default pose, quarter-cycle shift."""
-    from virl_quad.demo import gaits, render, score
+    from virl_quad.evaluation import score
+    from virl_quad.motion import gaits
 
     spec = robots.get(a.robot)
     motion = render.fit_loop(gaits.gait_motion(a.robot, a.gait), spec.control_hz)
@@ -125,7 +127,7 @@ def cmd_roundtrip(a: argparse.Namespace) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m virl_quad.demo`` argument parser."""
-    from virl_quad.demo.gaits import GAIT_NAMES
+    from virl_quad.motion.gaits import GAIT_NAMES
     from virl_quad.demo.render import PREVIEW_SIZE, PREVIEWS
 
     p = _Parser(prog="python -m virl_quad.demo", description=__doc__.split("\n\n")[0])

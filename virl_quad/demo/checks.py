@@ -42,7 +42,7 @@ def roundtrip(robot: str, gait: str = "trot", preview: str = "render", folder: s
     Returns ``mae`` (gray levels), frame counts, whether the importer followed a subject, the
     rendered and imported demonstrations.
     """
-    from virl_quad.demo.gaits import gait_motion
+    from virl_quad.motion.gaits import gait_motion
     from virl_quad.demo.render import render_demonstration
     from virl_quad.demo.video_import import import_video
 

@@ -4,38 +4,16 @@ A :class:`Demonstration` is a stack of 48x48 grayscale frames, one per
 control step, plus, when it was rendered from a known reference motion, that
 motion (for reference state initialisation and the ground-truth score).
 Anything with ``duration`` (s), ``loop`` (bool) and ``state_at(t) -> MotionState``
-serves as the motion.
+serves as the motion (:class:`virl_quad.motion.state.MotionLike`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
-
-@dataclass
-class MotionState:
-    """The reference robot state at one instant (SI units, canonical joint order)."""
-
-    root_pos: np.ndarray      # m, world (3)
-    root_quat: np.ndarray     # xyzw, world (4)
-    q: np.ndarray             # rad (12)
-    root_lin_vel: np.ndarray  # m/s, world (3)
-    root_ang_vel: np.ndarray  # rad/s, world (3)
-    dq: np.ndarray            # rad/s (12)
-
-
-class MotionLike(Protocol):
-    """The part of a reference motion the environment uses."""
-
-    duration: float
-    loop: bool
-
-    def state_at(self, t: float) -> MotionState:
-        """Reference state at time ``t`` (s)."""
-        ...
+from virl_quad.motion.state import MotionLike, MotionState  # noqa: F401  (re-exported)
 
 
 @dataclass

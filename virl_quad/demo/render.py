@@ -24,7 +24,7 @@ import numpy as np
 
 from virl_quad import robots
 from virl_quad.demo.demonstration import Demonstration
-from virl_quad.demo.motion import Motion, heading
+from virl_quad.motion.motion import Motion, heading
 from virl_quad.sim.camera import FRAME_SIZE, CameraParams
 from virl_quad.sim.params import DEFAULT_GROUND
 

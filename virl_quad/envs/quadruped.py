@@ -201,7 +201,7 @@ class QuadrupedEnv(gym.Env):
 
     def _oracle_reward(self, s: SimState) -> float:
         """motion_imitation's pose-imitation reward against the reference at the demo clock."""
-        from virl_quad.demo.score import Trajectory, reference_trajectory, term_errors, term_rewards
+        from virl_quad.evaluation.score import Trajectory, reference_trajectory, term_errors, term_rewards
 
         traj = Trajectory(root_pos=s.base_pos[None], root_quat=s.base_quat[None], q=s.q[None], dq=s.dq[None],
                           root_lin_vel=s.base_lin_vel[None], root_ang_vel=s.base_ang_vel[None],

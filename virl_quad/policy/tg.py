@@ -6,7 +6,7 @@ The policy modulates the TG's frequency and amplitude and adds joint residuals
 (:mod:`virl_quad.policy.action`).
 
 Foot of leg ``l`` at clock phase ``phi`` (the same gait definition as
-:mod:`virl_quad.demo.gaits`, seen from the body): the leg phase is
+:mod:`virl_quad.motion.gaits`, seen from the body): the leg phase is
 ``phi_l = (phi + offset_l) mod 1``; in stance (``phi_l < duty``) the foot moves straight
 backwards at constant speed from ``+L/2`` to ``-L/2`` about its neutral x (``L``: step
 length), at ``stance_height`` below the abduction joint; in swing (progress

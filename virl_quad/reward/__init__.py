@@ -14,13 +14,14 @@ training loop (Algorithm 1 of the paper)::
     losses = rm.update(num_updates)
     rewards = rm.recompute(agent, expert, dones, start_state, start_reset)
 
-See :mod:`virl_quad.reward.reward` for the reset conventions and
+See :mod:`virl_quad.reward.base` for the reset conventions and
 :class:`RewardConfig` for every setting (paper numbers as defaults).
 """
 
 from virl_quad.reward.config import NEGATIVE_PAIRS, POSITIVE_PAIRS, VARIANTS, RewardConfig
 from virl_quad.reward.dataset import EpisodeStore
-from virl_quad.reward.reward import RewardModel, StreamState, build_reward
+from virl_quad.reward.base import RewardModel, StreamState
+from virl_quad.reward.reward import build_reward
 
 __all__ = ["RewardConfig", "build_reward", "RewardModel", "StreamState", "EpisodeStore",
            "VARIANTS", "POSITIVE_PAIRS", "NEGATIVE_PAIRS"]

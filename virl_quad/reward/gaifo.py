@@ -19,7 +19,7 @@ from torch.nn import functional as F
 from virl_quad.reward.config import RewardConfig
 from virl_quad.reward.frames import FRAME
 from virl_quad.reward.model import conv_out
-from virl_quad.reward.reward import _CHUNK, RewardModel, StreamState
+from virl_quad.reward.base import _CHUNK, RewardModel, StreamState
 
 _SCALE = np.float32(1.0 / 255.0)
 

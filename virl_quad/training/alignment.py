@@ -1,7 +1,7 @@
 """Does the learned reward rank behaviours as the ground-truth score does? The alignment probe.
 
 A fixed, graded set of rollouts of the simulated robot (recorded once): the privileged tracker
-of :mod:`virl_quad.demo.tracker`, its actions scaled towards the default pose, with action
+of :mod:`virl_quad.evaluation.tracker`, its actions scaled towards the default pose, with action
 noise, half a cycle late, tracking other built-in gaits, standing still and random actions.
 Each rollout keeps its agent and demonstration frames and its ground-truth score (which the
 reward never sees). :func:`alignment` scores every rollout with a distance model, the reward
@@ -42,7 +42,7 @@ def controllers(robot: str, cycle: float, gait: str = "trot") -> dict[str, Contr
     """name -> controller, from best to worst in intent (``cycle``: the demonstration's, s; the
     other built-in gaits than ``gait`` are tracked as wrong motions)."""
     from virl_quad import demo as demo_lib
-    from virl_quad.demo.tracker import tracker_action
+    from virl_quad.evaluation.tracker import tracker_action
 
     others = {g: demo_lib.load(g, robot).motion for g in ("trot", "pace", "bound") if g != gait}
     out: dict[str, Controller] = {"standing still": lambda env, rng: np.zeros(12),
@@ -61,7 +61,8 @@ def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, random
             ground: str) -> tuple[np.ndarray, np.ndarray, float]:
     """(agent frames, expert frames, ground-truth total) of one episode of ``act``."""
     from virl_quad import envs
-    from virl_quad.demo.score import record_episode, score_trajectory
+    from virl_quad.evaluation.rollout import record_episode
+    from virl_quad.evaluation.score import score_trajectory
 
     env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
     rng = np.random.default_rng(seed)

@@ -6,7 +6,7 @@ motion's gait frequency (a whole number of cycles per loop of a looping clip), t
 phase offsets and the duty factor come from the foot heights, and step length, swing height,
 stance height and the feet's neutral positions from the trajectories; the report gives the
 fit's RMS foot error (m). :func:`gait_tg` converts a built-in gait
-(:mod:`virl_quad.demo.gaits`) exactly. :func:`tg_for_demo` picks: the fit when the
+(:mod:`virl_quad.motion.gaits`) exactly. :func:`tg_for_demo` picks: the fit when the
 demonstration has a reference motion, else the built-in gait of its name.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from virl_quad.demo.gaits import GAIT_NAMES, GaitParams, cycle_steps, gait_params
+from virl_quad.motion.gaits import GAIT_NAMES, GaitParams, cycle_steps, gait_params
 from virl_quad.policy.tg import BOUNDS, TGParams, TrajectoryGenerator, foot_positions
 from virl_quad.robots.spec import RobotSpec
 
@@ -28,7 +28,7 @@ OFFSET_GRID = 100      # candidate phase offsets per leg for the initial guess
 
 def gait_tg(spec: RobotSpec, gait: GaitParams) -> TGParams:
     """The TG of a built-in gait: the same feet relative to the body (frequency rounded to whole
-    control steps per cycle, as :func:`virl_quad.demo.gaits.gait_motion` renders it; the base's
+    control steps per cycle, as :func:`virl_quad.motion.gaits.gait_motion` renders it; the base's
     bob and pitch oscillations of a pronk or bound are not part of a TG)."""
     frequency = spec.control_hz / cycle_steps(spec, gait.frequency)
     hip_z = float(np.mean(np.asarray(spec.leg.abduction_origin)[:, 2]))
@@ -98,7 +98,7 @@ def _params(v: np.ndarray, frequency: float, neutral_y: np.ndarray) -> TGParams:
 
 def fit_tg(motion, spec: RobotSpec) -> tuple[TGParams, dict]:
     """Least-squares TG parameters for a reference motion (anything with ``duration``, ``loop``
-    and ``state_at``; a :class:`~virl_quad.demo.motion.Motion`'s keyframes are used directly).
+    and ``state_at``; a :class:`~virl_quad.motion.motion.Motion`'s keyframes are used directly).
 
     Returns ``(params, report)``; the report holds ``rms_m`` and ``max_m`` (foot error of the
     fit over the samples, m), ``frequency_hz``, ``cycles`` (gait cycles per pass of the motion)

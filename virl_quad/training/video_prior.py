@@ -139,7 +139,7 @@ class Synthesizer:
 
 def template(spec: RobotSpec) -> TGParams:
     """The starting TG: the robot's built-in trot (stance height, swing height, speed)."""
-    from virl_quad.demo.gaits import gait_params
+    from virl_quad.motion.gaits import gait_params
     from virl_quad.training.prior import gait_tg
 
     return gait_tg(spec, gait_params(spec.name, "trot"))

@@ -8,7 +8,7 @@ measured joint error on top of the TG's next pose,
 
 (``gain``, ``lead`` and the gathering noise: the robot's ``tracker_*``; Laikago's stiff PD
 needs no feedback) follows it
-(``virl_quad.demo.tracker``). It needs nothing but the TG and the robot's own joint
+(``virl_quad.evaluation.tracker``). It needs nothing but the TG and the robot's own joint
 angles, which the policy observes (the TG phase too), so it is a function of the observation
 and a proprioceptive policy can represent it: ``virl_quad.distill``'s DAgger copies it into
 the actor (the training architecture and observation) in a few minutes. PPO then starts from

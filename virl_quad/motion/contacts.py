@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from virl_quad import robots
-from virl_quad.demo.motion import Motion
+from virl_quad.motion.motion import Motion
 
 TOUCH = 0.02  # m, "touching": lowest foot sphere bottom at most this high
 SINK = 0.02   # m, largest allowed penetration
@@ -91,8 +91,8 @@ def motion_files(folder: str | Path | None = None) -> list[Path]:
 
 def contact_table(folder: str | Path | None = None, targets: tuple[str, ...] = ("laikago", "pupper")) -> list[ContactStats]:
     """Contact figures of every clip in ``folder`` on each robot of ``targets`` (retargeted as needed)."""
-    from virl_quad.demo.motion_io import read_motion
-    from virl_quad.demo.retarget import retarget_with_residual
+    from virl_quad.motion.motion_io import read_motion
+    from virl_quad.motion.retarget import retarget_with_residual
 
     rows = []
     for path in motion_files(folder):

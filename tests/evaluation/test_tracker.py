@@ -7,7 +7,7 @@ import pytest
 
 from virl_quad import envs
 from virl_quad.demo import render
-from virl_quad.demo.tracker import tracker_action
+from virl_quad.evaluation.tracker import tracker_action
 
 
 def _drive(demo, track: bool, seconds: float = 3.0) -> tuple[bool, float, float]:

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from virl_quad.demo.demonstration import MotionState
-from virl_quad.demo.motion import Motion, heading
+from virl_quad.motion.motion import Motion, heading
 
 
 def _line_motion(n: int = 11, dt: float = 0.1, speed: float = 0.5, yaw_rate: float = 0.0, **kw) -> Motion:

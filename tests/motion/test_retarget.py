@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo import contacts, motion_io, retarget
+from virl_quad.motion import contacts, motion_io, retarget
 from virl_quad.kinematics import Kinematics
 
 

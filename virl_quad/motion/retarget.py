@@ -18,8 +18,8 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
-from virl_quad.demo.gaits import world_to_base
-from virl_quad.demo.motion import Motion
+from virl_quad.motion.gaits import world_to_base
+from virl_quad.motion.motion import Motion
 
 
 def leg_length(kin) -> float:

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
-from virl_quad.demo.motion import Motion
+from virl_quad.motion.motion import Motion
 from virl_quad.robots.spec import RobotSpec
 
 #: Phase offsets (fraction of a cycle) of the legs FR, FL, RR, RL.

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo import render, score
+from virl_quad.demo import render
+from virl_quad.evaluation import rollout, score
 
 TERMS = list(score.TERMS)
 
@@ -77,7 +78,7 @@ def test_term_errors_are_what_they_say(gait_motions):
 
 def test_evaluate_a_policy_in_the_environment(gait_motions, tmp_path):
     demo = render.render_demonstration(gait_motions[("laikago", "trot")], "laikago", min_seconds=0.5)
-    res = score.evaluate(lambda obs: np.zeros(12), "laikago", demo, episodes=2, seed=3, episode_seconds=1.0,
+    res = rollout.evaluate(lambda obs: np.zeros(12), "laikago", demo, episodes=2, seed=3, episode_seconds=1.0,
                          randomize=False, video=str(tmp_path / "eval.mp4"))
     for k in TERMS + ["total", "total_best_offset", "survival_fraction", "speed_ratio"]:
         assert np.isfinite(res[k]), k
@@ -89,4 +90,4 @@ def test_evaluate_needs_a_motion():
     from virl_quad.demo.demonstration import Demonstration
     d = Demonstration(frames=np.zeros((5, 48, 48), np.uint8), fps=50.0)
     with pytest.raises(ValueError, match="no reference motion"):
-        score.evaluate(lambda o: np.zeros(12), "pupper", d, episodes=1)
+        rollout.evaluate(lambda o: np.zeros(12), "pupper", d, episodes=1)

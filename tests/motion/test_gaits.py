@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from virl_quad import robots
-from virl_quad.demo import gaits
+from virl_quad.motion import gaits
 from virl_quad.kinematics import Kinematics
 
 PAIRS = {  # legs (FR, FL, RR, RL = 0..3) that move together

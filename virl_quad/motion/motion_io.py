@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from virl_quad.demo.motion import Motion
+from virl_quad.motion.motion import Motion
 from virl_quad.kinematics.frames import LIMITS_URDF_BASE_IN_ZUP, quat_conjugate, quat_multiply
 
 ROW_WIDTH = 19  # root position 3 + root quaternion 4 + 12 joint angles

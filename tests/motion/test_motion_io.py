@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
-from virl_quad.demo import contacts, motion_io
-from virl_quad.demo.motion import Motion, heading
+from virl_quad.motion import contacts, motion_io
+from virl_quad.motion.motion import Motion, heading
 
 MOTOR_OFFSETS = np.array([0.0, -0.6, 0.66] * 4)  # motion_imitation's motor angle - URDF angle, rad
 
