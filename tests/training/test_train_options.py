@@ -9,7 +9,7 @@ import pytest
 
 from virl_quad.train import _other_clips
 from virl_quad.training.config import TrainArgs, validate
-from virl_quad.training.rewards import LearnedReward, lift_median
+from virl_quad.training.rewards import LearnedReward
 
 
 def test_auto_uses_the_other_builtin_gaits_and_is_saved(tmp_path: Path) -> None:
@@ -34,21 +34,6 @@ def test_adversarial_weight_reaches_the_pair_sampler() -> None:
     assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pair_weights == {}
     with pytest.raises(ValueError, match="adversarial-weight"):
         validate(TrainArgs(adversarial_weight=-1.0))
-
-
-def test_lift_median_keeps_the_order_and_lifts_a_sunk_scale() -> None:
-    import torch
-
-    sunk = torch.tensor([[1e-8, 0.004, 0.01], [0.02, 0.03, 0.9]])
-    lifted, power = lift_median(sunk, 0.5)
-    assert 0 < power < 1 and float(lifted.median()) == pytest.approx(0.5)
-    assert torch.equal(torch.argsort(lifted.flatten()), torch.argsort(sunk.flatten()))   # same order
-    assert bool((lifted >= sunk).all()) and bool((lifted <= 1).all())
-    high = torch.tensor([0.9, 0.7, 0.6])
-    assert lift_median(high, 0.5) == (high, 1.0)                # a median already above: untouched
-    assert lift_median(sunk, 0.0)[1] == 1.0                      # off
-    with pytest.raises(ValueError, match="reward-median"):
-        validate(TrainArgs(reward_median=1.0))
 
 
 def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:

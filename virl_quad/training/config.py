@@ -52,11 +52,6 @@ class TrainArgs:
         "distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)")
     reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
     reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
-    reward_median: float = opt(0.0,
-        "a learned reward's rollout is raised to the power that lifts its median to this when it is "
-        "lower: the same order of behaviours, but a scale that does not sink towards 0 (and take the "
-        "reason to stay up with it) as the distance model tells the agent from the expert; 0: the paper's"
-        " reward as is")
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
         "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")
@@ -127,8 +122,6 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --prior-from {args.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.ground not in GROUNDS:
         raise ValueError(f"unknown --ground {args.ground!r}; choose one of: {', '.join(GROUNDS)}")
-    if not 0.0 <= args.reward_median < 1.0:
-        raise ValueError(f"--reward-median must be in [0, 1), got {args.reward_median}")
     if args.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.adversarial_weight}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:

@@ -36,29 +36,16 @@ def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[tor
     return agent, expert
 
 
-def lift_median(rewards: torch.Tensor, median: float) -> tuple[torch.Tensor, float]:
-    """``rewards ** a`` (rewards in (0, 1]) with the largest ``a`` <= 1 that puts their median at
-    ``median`` or above: the same order of behaviours, on a scale that does not sink towards 0 as
-    the distance model drifts apart from the agent. Returns the lifted rewards and ``a``."""
-    m = float(rewards.median())
-    if median <= 0 or m >= median or m <= 0:
-        return rewards, 1.0
-    a = float(np.log(median) / np.log(m))
-    return rewards.clamp_min(1e-30) ** a, a
-
-
 class LearnedReward:
     """Algorithm 1's reward: a distance model trained online beside the policy."""
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
-                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 median: float = 0.0) -> None:
+                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
-        self.median = median                   # lift each rollout's median reward to this (0: off)
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
         self._agent: list[torch.Tensor] = []
@@ -84,8 +71,6 @@ class LearnedReward:
         # weights); envs whose episode ended on the last step start fresh.
         rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
-        info["reward/median_before_lift"] = float(rewards.median())
-        rewards, info["reward/lift_power"] = lift_median(rewards, self.median)
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
