@@ -67,7 +67,7 @@ def train_one(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> 
     cmd = [sys.executable, "-m", "virl_quad.train", "--robot", args.robot, "--demo", demo or args.demo,
            "--reward", reward, "--minutes", str(args.minutes), "--seed", str(args.seed),
            "--run-dir", str(run_dir), "--video" if args.video else "--no-video", *args.train_args.split()]
-    print(f"[{reward}] {' '.join(cmd[1:])}", flush=True)
+    print(f"[{run_dir.name}] {' '.join(cmd[1:])}", flush=True)
     log_path = run_dir.parent / f"{run_dir.name}.log"
     with open(log_path, "w") as log:
         p = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT)
