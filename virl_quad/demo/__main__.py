@@ -91,6 +91,7 @@ def cmd_contacts(a: argparse.Namespace) -> None:
 
 def cmd_score(a: argparse.Namespace) -> None:
     """Self-check of the score on a gait: playback (1.0), default pose, quarter-cycle shift."""
+    from virl_quad.demo import render
     from virl_quad.evaluation import score
     from virl_quad.motion import gaits
 

@@ -262,6 +262,8 @@ class RewardModel:
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise ValueError(f"{path}: not a {FORMAT} file")
         cfg = RewardConfig.from_dict(d["config"])
+        from virl_quad.reward.reward import build_reward   # the factory of every variant
+
         rm = build_reward(cfg, d["demo"].numpy(), [c.numpy() for c in d["clips"]], d["seed"], device)
         rm.load_state_dict(d)
         return rm
