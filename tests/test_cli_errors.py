@@ -1,5 +1,5 @@
 """Bad command lines of every entry point: one ``error:`` line on stderr, exit code 2, no usage block
-and no traceback (issue 18's table, and the bad inputs of earlier issues)."""
+and no traceback."""
 
 from __future__ import annotations
 

@@ -76,6 +76,22 @@ def train_one(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> 
         raise RuntimeError(f"training with --reward {reward} failed (exit {p.returncode}): {tail[0]}")
 
 
+def refuse_unfinished(run_dirs: list[Path]) -> None:
+    """UserError when one of ``run_dirs`` holds a run that started and did not finish."""
+    for run in run_dirs:
+        if (run / "checkpoint.pt").exists() and not (run / "report.json").exists():
+            raise UserError(f"{run} holds an unfinished run: resume it with virl_quad.train or give another --out")
+
+
+def train_or_reuse(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> None:
+    """:func:`train_one`, unless ``run_dir`` already holds a finished run (an interrupted
+    comparison picks up where it stopped)."""
+    if (run_dir / "report.json").exists():
+        print(f"[{run_dir.name}] reusing the finished run in {run_dir}", flush=True)
+    else:
+        train_one(args, reward, run_dir, demo)
+
+
 def evaluate_run(args: CompareArgs, run_dir: Path) -> dict:
     """Export the run's policy and score it: the evaluation's figures plus iterations and env steps."""
     from virl_quad import demo as demo_lib
@@ -167,19 +183,14 @@ def main(args: CompareArgs) -> int:
         return run_confusion(args, Path(args.out or f"runs/confusion-{args.robot}-{time.strftime('%Y%m%d-%H%M%S')}"))
     rewards = parse_rewards(args.rewards)
     out = Path(args.out or f"runs/compare-{args.robot}-{Path(args.demo).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
-    for r in rewards:
-        if (out / r / "checkpoint.pt").exists() and not (out / r / "report.json").exists():
-            raise UserError(f"{out / r} holds an unfinished run: resume it with virl_quad.train or give another --out")
+    refuse_unfinished([out / r for r in rewards])
     out.mkdir(parents=True, exist_ok=True)
     print(f"comparing {', '.join(rewards)} on {args.robot} {args.demo}, {args.minutes:g} min each; "
           f"results in {out}", flush=True)
     results: dict[str, dict] = {}
     for reward in rewards:
         try:
-            if (out / reward / "report.json").exists():      # an interrupted comparison picks up here
-                print(f"[{reward}] reusing the finished run in {out / reward}", flush=True)
-            else:
-                train_one(args, reward, out / reward)
+            train_or_reuse(args, reward, out / reward)
             results[reward] = evaluate_run(args, out / reward)
             r = results[reward]
             print(f"[{reward}] score {r['total']:.3f}, survival {r['survival_fraction']:.2f}, "

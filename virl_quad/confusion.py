@@ -24,13 +24,15 @@ import numpy as np
 from virl_quad.cli import UserError
 
 
-def parse_gaits(text: str, robot: str) -> list[str]:
-    """The comma-separated demonstrations, checked: at least two, distinct, each with a reference motion."""
+def parse_gaits(text: str, robot: str) -> dict[str, object]:
+    """The comma-separated demonstrations, checked (at least two, distinct, each with a reference
+    motion): {name: its reference motion}."""
     from virl_quad import demo as demo_lib
 
     names = [g.strip() for g in text.split(",") if g.strip()]
     if len(names) < 2 or len(set(names)) != len(names):
         raise UserError(f"--confusion needs two or more distinct demonstrations, got {text!r}")
+    motions = {}
     for name in names:
         try:
             demo = demo_lib.load(name, robot)
@@ -38,7 +40,8 @@ def parse_gaits(text: str, robot: str) -> list[str]:
             raise UserError(str(e)) from None
         if demo.motion is None:
             raise UserError(f"--confusion: {name!r} has no reference motion to score against")
-    return names
+        motions[name] = demo.motion
+    return motions
 
 
 def record(policy, robot: str, demo, episodes: int, seconds: float) -> list[tuple]:
@@ -103,34 +106,27 @@ def run_confusion(args, out: Path) -> int:
     """Train (or reuse) VIRL on each gait of ``args.confusion``, score each against each, write the matrix."""
     from virl_quad import demo as demo_lib
     from virl_quad import robots
-    from virl_quad.compare import train_one
+    from virl_quad.compare import refuse_unfinished, train_or_reuse
     from virl_quad.export import export
     from virl_quad.kinematics import Kinematics
     from virl_quad.policy_io import load_policy
 
-    gaits = parse_gaits(args.confusion, args.robot)
-    for g in gaits:
-        run = out / Path(g).stem
-        if (run / "checkpoint.pt").exists() and not (run / "report.json").exists():
-            raise UserError(f"{run} holds an unfinished run: resume it with virl_quad.train or give another --out")
+    motions = parse_gaits(args.confusion, args.robot)
+    gaits = list(motions)
+    refuse_unfinished([out / Path(g).stem for g in gaits])
     out.mkdir(parents=True, exist_ok=True)
     print(f"confusion of {', '.join(gaits)} on {args.robot}, VIRL at {args.minutes:g} min each; "
           f"results in {out}", flush=True)
     for g in gaits:
-        run = out / Path(g).stem
-        if (run / "report.json").exists():
-            print(f"[{g}] reusing the finished run in {run}", flush=True)
-        else:
-            train_one(args, "virl", run, demo=g)
+        train_or_reuse(args, "virl", out / Path(g).stem, demo=g)
     kin = Kinematics(robots.get(args.robot))
-    motions = [demo_lib.load(g, args.robot).motion for g in gaits]
     matrix = np.zeros((len(gaits), len(gaits)))
     for i, g in enumerate(gaits):
         run = out / Path(g).stem
         policy = load_policy(export(run, run / "policy.pt"))
         rollouts = record(policy, args.robot, demo_lib.load(str(run / "demo.npz"), args.robot),
                           args.episodes, args.seconds)
-        matrix[i] = [score_against(rollouts, m, args.robot, kin) for m in motions]
+        matrix[i] = [score_against(rollouts, motions[h], args.robot, kin) for h in gaits]
         print(f"[{g}] " + ", ".join(f"{h} {v:.3f}" for h, v in zip(gaits, matrix[i])), flush=True)
     table = matrix_markdown(args.robot, gaits, matrix, args.episodes, args.minutes)
     (out / "confusion.md").write_text(table)

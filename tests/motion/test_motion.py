@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from virl_quad.demo.demonstration import MotionState
+from virl_quad.motion.state import MotionState
 from virl_quad.motion.motion import Motion, heading
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from virl_quad.reward import VARIANTS, RewardConfig, RewardModel, build_reward
+from virl_quad.reward import VARIANTS, RewardConfig, build_reward, load_reward
 
 
 def rollout(seed: int, T: int = 7, N: int = 5):
@@ -109,7 +109,7 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
     rm.save(path)
     raw = torch.load(path, weights_only=True)                     # plain tensors and python types
     assert raw["config"]["variant"] == variant
-    loaded = RewardModel.load(path)
+    loaded = load_reward(path)
     agent, expert, dones = rollout(4)
     s = rm.stream_state(5)
     assert torch.equal(rm.recompute(agent, expert, dones, s), loaded.recompute(agent, expert, dones, s))
@@ -125,7 +125,7 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
     reweighted = make(variant, RewardConfig(**{**small_cfg.to_dict(), "pair_weights": {"expert_vs_agent": 0.0}}),
                       demo, other, agent_episode)
     reweighted.load_state_dict(torch.load(path, weights_only=True))
-    fresh = RewardModel.load(path)                                # the saved state, not updated since
+    fresh = load_reward(path)                                # the saved state, not updated since
     assert torch.equal(fresh.recompute(agent, expert, dones, s), reweighted.recompute(agent, expert, dones, s))
     assert reweighted.cfg.pair_weights == {"expert_vs_agent": 0.0}
     # so may w_d: the same distances, another reward shape (exp(-1 d^2) = exp(-5 d^2) ** 0.2)

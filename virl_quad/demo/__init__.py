@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from virl_quad import robots
-from virl_quad.demo.demonstration import Demonstration, MotionLike, MotionState
+from virl_quad.demo.demonstration import Demonstration
+from virl_quad.motion.state import MotionLike, MotionState
 from virl_quad.sim.params import DEFAULT_GROUND
 
 if TYPE_CHECKING:

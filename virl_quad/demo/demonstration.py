@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from virl_quad.motion.state import MotionLike, MotionState  # noqa: F401  (re-exported)
+from virl_quad.motion.state import MotionLike
 
 
 @dataclass

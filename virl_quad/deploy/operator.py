@@ -130,6 +130,11 @@ class Operator:
         with self._lock:
             return dict(self.status)
 
+    def latest_state(self) -> P.RobotState | None:
+        """The newest STATE (None before the first)."""
+        with self._lock:
+            return self.state
+
     def wait_status(self, pred: Callable[[dict[str, Any]], bool], timeout: float = 60.0) -> dict[str, Any]:
         """Wait up to ``timeout`` s for a STATUS satisfying ``pred``; returns it, or the last
         one seen (for which ``pred`` is false)."""
@@ -185,9 +190,7 @@ def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
         if as_json:
             print(json.dumps(status, sort_keys=True), flush=True)
             return
-        with op._lock:
-            state = op.state
-        text = format_status(status, state)
+        text = format_status(status, op.latest_state())
         print(("\x1b[H\x1b[J" if redraw else "") + text + ("" if redraw else "\n"), flush=True)
     return show
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from virl_quad.demo.demonstration import MotionState
+from virl_quad.motion.state import MotionState
 
 #: Accepted playback speed factors for time warping (VIRL's augmentation range).
 WARP_RANGE = (0.5, 2.0)

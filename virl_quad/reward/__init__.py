@@ -21,7 +21,7 @@ See :mod:`virl_quad.reward.base` for the reset conventions and
 from virl_quad.reward.config import NEGATIVE_PAIRS, POSITIVE_PAIRS, VARIANTS, RewardConfig
 from virl_quad.reward.dataset import EpisodeStore
 from virl_quad.reward.base import RewardModel, StreamState
-from virl_quad.reward.reward import build_reward
+from virl_quad.reward.reward import build_reward, from_state_dict, load_reward
 
-__all__ = ["RewardConfig", "build_reward", "RewardModel", "StreamState", "EpisodeStore",
+__all__ = ["RewardConfig", "build_reward", "from_state_dict", "load_reward", "RewardModel", "StreamState", "EpisodeStore",
            "VARIANTS", "POSITIVE_PAIRS", "NEGATIVE_PAIRS"]

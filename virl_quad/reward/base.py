@@ -252,18 +252,6 @@ class RewardModel:
         self.trainer.load_state_dict(d["trainer"])
 
     def save(self, path: str | Path) -> None:
-        """Write :meth:`state_dict` to ``path`` (readable with torch.load(weights_only=True))."""
+        """Write :meth:`state_dict` to ``path`` (readable with torch.load(weights_only=True));
+        :func:`virl_quad.reward.reward.load_reward` rebuilds the model from it."""
         torch.save(self.state_dict(), str(path))
-
-    @staticmethod
-    def load(path: str | Path, device: str | torch.device = "cpu") -> "RewardModel":
-        """Rebuild a reward model saved with :meth:`save` (the dataset starts empty)."""
-        d = torch.load(str(path), map_location="cpu", weights_only=True)
-        if not isinstance(d, dict) or d.get("format") != FORMAT:
-            raise ValueError(f"{path}: not a {FORMAT} file")
-        cfg = RewardConfig.from_dict(d["config"])
-        from virl_quad.reward.reward import build_reward   # the factory of every variant
-
-        rm = build_reward(cfg, d["demo"].numpy(), [c.numpy() for c in d["clips"]], d["seed"], device)
-        rm.load_state_dict(d)
-        return rm

@@ -4,11 +4,13 @@ and their reset conventions are those of :mod:`virl_quad.reward.base`."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import torch
 from torch import nn
 
-from virl_quad.reward.base import _CHUNK, RewardModel, StreamState
+from virl_quad.reward.base import _CHUNK, FORMAT, RewardModel, StreamState
 from virl_quad.reward.config import RewardConfig
 from virl_quad.reward.frames import FRAME, to_uint8
 from virl_quad.reward.losses import total_loss
@@ -86,3 +88,20 @@ def build_reward(cfg: RewardConfig, demo_frames, other_clips: list | None = None
 
         return GaifoReward(cfg, demo, clips, seed, device)
     return VirlReward(cfg, demo, clips, seed, device)
+
+
+def from_state_dict(d: dict, device: str | torch.device = "cpu") -> RewardModel:
+    """The reward model of any variant rebuilt from its :meth:`RewardModel.state_dict` (the
+    dataset starts empty)."""
+    cfg = RewardConfig.from_dict(d["config"])
+    rm = build_reward(cfg, d["demo"].numpy(), [c.numpy() for c in d["clips"]], d["seed"], device)
+    rm.load_state_dict(d)
+    return rm
+
+
+def load_reward(path: str | Path, device: str | torch.device = "cpu") -> RewardModel:
+    """A reward model saved with :meth:`RewardModel.save`; ValueError for another kind of file."""
+    d = torch.load(str(path), map_location="cpu", weights_only=True)
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise ValueError(f"{path}: not a {FORMAT} file")
+    return from_state_dict(d, device)

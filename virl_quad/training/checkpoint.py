@@ -105,8 +105,7 @@ def load_reward_model(run_dir: str | Path):
 
     ValueError (one line) when the run has no checkpoint or no learned distance (oracle)."""
     from virl_quad import demo as demo_lib
-    from virl_quad.reward.config import RewardConfig
-    from virl_quad.reward.reward import build_reward
+    from virl_quad.reward.reward import from_state_dict
 
     run_dir = Path(run_dir)
     data = load(run_dir)
@@ -114,7 +113,6 @@ def load_reward_model(run_dir: str | Path):
     if "net" not in d:
         raise ValueError(f"{run_dir}: this run has no learned distance model (oracle reward?)")
     clips = [c.numpy() for c in d["clips"]]
-    rm = build_reward(RewardConfig.from_dict(d["config"]), d["demo"].numpy(), clips, d["seed"])
-    rm.load_state_dict(d)
+    rm = from_state_dict(d)
     robot = data["config"]["robot"]
     return rm, demo_lib.load(str(run_dir / "demo.npz"), robot), clips, robot
