@@ -5,6 +5,10 @@ For each robot it prints:
 - the raw PyBullet bound for the same robot and substeps (a bare loop of torque commands +
   stepSimulation, no state readout, no rendering) and the ratio env / raw (goal >= 0.6),
 - the VecEnv speed-up from 1 to 2 worker processes (goal >= 1.7x on 2 idle cores).
+
+``--workers ray`` measures instead, for each robot, the VecEnv with 2 Ray actors on a local
+Ray cluster of 2 CPUs against 2 local worker processes, alternating in one run (goal >= 0.9x),
+and Ray's overhead per vector step (ms). Needs ``pip install -e ".[cluster]"``.
 Figures depend on what else the machine is doing: run it on an idle machine.
 """
 
@@ -54,9 +58,9 @@ def raw_rate(robot: str, steps: int) -> float:
         return steps / (time.perf_counter() - t)
 
 
-def vec_rate(robot: str, workers: int, num_envs: int, steps: int) -> float:
-    """Env steps/s (summed over envs) of the VecEnv with ``workers`` processes."""
-    env = QuadrupedVecEnv(robot, num_envs, num_workers=workers, seed=0)
+def vec_rate(robot: str, workers: int, num_envs: int, steps: int, kind: str = "local") -> float:
+    """Env steps/s (summed over envs) of the VecEnv with ``workers`` workers of ``kind``."""
+    env = QuadrupedVecEnv(robot, num_envs, num_workers=workers, seed=0, workers_kind=kind)
     a = torch.zeros(num_envs, 12)
     for _ in range(5):
         env.step(a)
@@ -66,6 +70,26 @@ def vec_rate(robot: str, workers: int, num_envs: int, steps: int) -> float:
     rate = num_envs * steps / (time.perf_counter() - t)
     env.close()
     return rate
+
+
+def ray_comparison(robot: str, num_envs: int, steps: int, repeats: int = 3) -> None:
+    """2 Ray actors against 2 local processes, alternating ``repeats`` times; prints each pair."""
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+    vec_steps = steps // num_envs * 2
+    ratios, local, remote = [], [], []
+    for k in range(repeats):
+        local.append(vec_rate(robot, 2, num_envs, vec_steps))
+        remote.append(vec_rate(robot, 2, num_envs, vec_steps, kind="ray"))
+        ratios.append(remote[-1] / local[-1])
+        print(f"  {robot}, repeat {k + 1}: 2 local workers {local[-1]:7.1f} env steps/s, 2 Ray actors "
+              f"{remote[-1]:7.1f}: {ratios[-1]:.2f}x", flush=True)
+    lo, rr = float(np.median(local)), float(np.median(remote))
+    overhead_ms = (num_envs / rr - num_envs / lo) * 1e3
+    print(f"{robot}: {num_envs} envs, median of {repeats}: Ray / local {float(np.median(ratios)):.2f}x "
+          f"(goal >= 0.9x); Ray's overhead {overhead_ms:+.2f} ms per vector step "
+          f"({num_envs / lo * 1e3:.2f} ms locally)")
 
 
 def main(robot_names: list[str], steps: int, num_envs: int) -> None:
@@ -91,5 +115,13 @@ if __name__ == "__main__":
     parser.add_argument("--robot", default="all", choices=["all", *robots.names()])
     parser.add_argument("--steps", type=int, default=400, help="control steps per measurement")
     parser.add_argument("--num-envs", type=int, default=8, help="envs in the VecEnv measurement")
+    parser.add_argument("--workers", default="local", choices=["local", "ray"],
+                        help="ray: 2 Ray actors against 2 local worker processes (see above)")
     args = parser.parse_args()
-    main(list(robots.names()) if args.robot == "all" else [args.robot], args.steps, args.num_envs)
+    names = list(robots.names()) if args.robot == "all" else [args.robot]
+    if args.workers == "ray":
+        torch.set_num_threads(1)
+        for name in names:
+            ray_comparison(name, args.num_envs, args.steps)
+        raise SystemExit(0)
+    main(names, args.steps, args.num_envs)

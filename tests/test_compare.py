@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 TINY_TRAIN = ("--train-args=--num-envs 2 --steps-per-env 8 --num-workers 1 --iterations 2 --warm-start-rounds 1 "
               "--warm-start-steps 40 --critic-warmup 1 --eval-episodes 1 --eval-seconds 0.5 --eval-every 1")
 
@@ -73,3 +75,18 @@ def test_bad_confusion_lists_are_one_error_line(tmp_path: Path) -> None:
         assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
         assert p.stderr.startswith("error:") and message in p.stderr, p.stderr
         assert not (tmp_path / "x").exists()
+
+
+def test_runs_go_at_once_as_ray_tasks(tmp_path: Path) -> None:
+    """--workers ray: on a local Ray cluster of this machine's CPUs (2 here), two runs of one CPU
+    each are scheduled together, so they overlap in time."""
+    pytest.importorskip("ray", reason='needs the cluster extra: pip install -e ".[cluster]"')
+    out = tmp_path / "cmp"
+    p = run("--rewards", "oracle,prior", "--minutes", "5", "--episodes", "1", "--seconds", "0.5", "--no-video",
+            "--out", str(out), "--workers", "ray", "--cpus-per-run", "1", TINY_TRAIN)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    assert p.stdout.count("a Ray task of 1 CPUs") == 2, p.stdout[-2000:]
+    results = json.loads((out / "results.json").read_text())["results"]
+    (a0, a1), (b0, b1) = ((results[r]["start"], results[r]["end"]) for r in ("oracle", "prior"))
+    assert a0 < b1 and b0 < a1, results                 # the two runs overlapped
+    assert all(results[r]["iterations"] == 2 for r in ("oracle", "prior"))

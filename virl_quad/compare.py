@@ -3,7 +3,8 @@
     python -m virl_quad.compare --robot pupper --demo trot --rewards virl,frame,gaifo,oracle,prior --minutes 20
 
 Each reward is one ``python -m virl_quad.train`` run (same robot, demonstration, seed and
-wall-clock budget, one after the other: they share this machine's cores), exported and then
+wall-clock budget; one after the other, as they share this machine's cores, or at once on a Ray
+cluster with ``--workers ray``: see :mod:`virl_quad.schedule`), exported and then
 evaluated with the ground-truth imitation score (``--episodes`` seeded episodes, domain
 randomisation on) beside holding the default pose. ``prior`` trains the gait prior and warm
 start with a survival reward only: a learned reward that does not beat it adds nothing.
@@ -16,14 +17,14 @@ run already in ``--out`` is reused, so an interrupted comparison picks up where 
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
-from virl_quad.training.config import REWARDS
+from virl_quad.schedule import Job, train_all
+from virl_quad.training.config import REWARDS, WORKER_KINDS
 
 
 @dataclass
@@ -43,6 +44,12 @@ class CompareArgs:
     video: bool = opt(True, "each run writes its side-by-side video")
     train_args: str = opt("",
         "further options for every training run, written --train-args=\"--num-envs 32 --eval-every 10\"")
+    workers: str = opt("local",
+        "where the training runs go: local (one after the other on this machine) or ray (at once, as Ray "
+        "tasks of --cpus-per-run CPUs on the cluster at --ray-address; --out must be a path every machine "
+        "sees)", choices=WORKER_KINDS)
+    ray_address: str = opt("", "with --workers ray: the cluster (auto, host:port; empty: start a local one)")
+    cpus_per_run: int = opt(2, "with --workers ray: CPUs each run reserves (and its env workers)")
     confusion: str = opt("",
         "instead: comma-separated gaits (e.g. trot,pace,bound), VIRL trained on each video and scored "
         "against each reference (see virl_quad.confusion)")
@@ -61,35 +68,11 @@ def parse_rewards(text: str) -> list[str]:
     return names
 
 
-def train_one(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> None:
-    """One training run on ``demo`` (default ``args.demo``) as a subprocess, logged beside
-    ``run_dir``: a failing run raises RuntimeError with its last log line."""
-    cmd = [sys.executable, "-m", "virl_quad.train", "--robot", args.robot, "--demo", demo or args.demo,
-           "--reward", reward, "--minutes", str(args.minutes), "--seed", str(args.seed),
-           "--run-dir", str(run_dir), "--video" if args.video else "--no-video", *args.train_args.split()]
-    print(f"[{run_dir.name}] {' '.join(cmd[1:])}", flush=True)
-    log_path = run_dir.parent / f"{run_dir.name}.log"
-    with open(log_path, "w") as log:
-        p = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT)
-    if p.returncode != 0:
-        tail = log_path.read_text().strip().splitlines()[-1:] or ["?"]
-        raise RuntimeError(f"training with --reward {reward} failed (exit {p.returncode}): {tail[0]}")
-
-
 def refuse_unfinished(run_dirs: list[Path]) -> None:
     """UserError when one of ``run_dirs`` holds a run that started and did not finish."""
     for run in run_dirs:
         if (run / "checkpoint.pt").exists() and not (run / "report.json").exists():
             raise UserError(f"{run} holds an unfinished run: resume it with virl_quad.train or give another --out")
-
-
-def train_or_reuse(args: CompareArgs, reward: str, run_dir: Path, demo: str = "") -> None:
-    """:func:`train_one`, unless ``run_dir`` already holds a finished run (an interrupted
-    comparison picks up where it stopped)."""
-    if (run_dir / "report.json").exists():
-        print(f"[{run_dir.name}] reusing the finished run in {run_dir}", flush=True)
-    else:
-        train_one(args, reward, run_dir, demo)
 
 
 def evaluate_run(args: CompareArgs, run_dir: Path) -> dict:
@@ -177,6 +160,8 @@ def main(args: CompareArgs) -> int:
     """Train, evaluate, tabulate and plot every reward (or the gait confusion); exit 2 on bad options."""
     if args.minutes <= 0 or args.episodes < 1 or args.seconds <= 0:
         raise UserError("--minutes and --seconds must be > 0 and --episodes >= 1")
+    if args.cpus_per_run < 1:
+        raise UserError(f"--cpus-per-run must be >= 1, got {args.cpus_per_run}")
     if args.confusion:
         from virl_quad.confusion import run_confusion
 
@@ -187,17 +172,17 @@ def main(args: CompareArgs) -> int:
     out.mkdir(parents=True, exist_ok=True)
     print(f"comparing {', '.join(rewards)} on {args.robot} {args.demo}, {args.minutes:g} min each; "
           f"results in {out}", flush=True)
+    runs = train_all(args, [Job(r, out / r) for r in rewards])
     results: dict[str, dict] = {}
     for reward in rewards:
-        try:
-            train_or_reuse(args, reward, out / reward)
-            results[reward] = evaluate_run(args, out / reward)
-            r = results[reward]
-            print(f"[{reward}] score {r['total']:.3f}, survival {r['survival_fraction']:.2f}, "
-                  f"speed {r['speed_ratio']:.2f} ({r['env_steps']:,d} env steps)", flush=True)
-        except RuntimeError as e:
-            results[reward] = {"error": str(e)}
-            print(f"[{reward}] {e}", flush=True)
+        if "error" in runs[out / reward]:
+            results[reward] = {"error": runs[out / reward]["error"]}
+            print(f"[{reward}] {results[reward]['error']}", flush=True)
+            continue
+        results[reward] = {**evaluate_run(args, out / reward), **runs[out / reward]}
+        r = results[reward]
+        print(f"[{reward}] score {r['total']:.3f}, survival {r['survival_fraction']:.2f}, "
+              f"speed {r['speed_ratio']:.2f} ({r['env_steps']:,d} env steps)", flush=True)
     done = [r for r in rewards if "total" in results[r]]
     if not done:
         raise UserError(f"every training run failed; their logs are in {out}")

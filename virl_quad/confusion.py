@@ -106,7 +106,8 @@ def run_confusion(args, out: Path) -> int:
     """Train (or reuse) VIRL on each gait of ``args.confusion``, score each against each, write the matrix."""
     from virl_quad import demo as demo_lib
     from virl_quad import robots
-    from virl_quad.compare import refuse_unfinished, train_or_reuse
+    from virl_quad.compare import refuse_unfinished
+    from virl_quad.schedule import Job, train_all
     from virl_quad.export import export
     from virl_quad.kinematics import Kinematics
     from virl_quad.policy_io import load_policy
@@ -117,8 +118,11 @@ def run_confusion(args, out: Path) -> int:
     out.mkdir(parents=True, exist_ok=True)
     print(f"confusion of {', '.join(gaits)} on {args.robot}, VIRL at {args.minutes:g} min each; "
           f"results in {out}", flush=True)
-    for g in gaits:
-        train_or_reuse(args, "virl", out / Path(g).stem, demo=g)
+    runs = train_all(args, [Job("virl", out / Path(g).stem, demo=g) for g in gaits])
+    failed = [(run, r["error"]) for run, r in runs.items() if "error" in r]
+    if failed:
+        run, error = failed[0]
+        raise UserError(f"{error} (its log: {run.parent / (run.name + '.log')})")
     kin = Kinematics(robots.get(args.robot))
     matrix = np.zeros((len(gaits), len(gaits)))
     for i, g in enumerate(gaits):

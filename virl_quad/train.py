@@ -176,6 +176,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
     action_options = _action_options(args, demo, resume_data, run_dir)
     env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
+                          workers_kind=args.workers, ray_address=args.ray_address or None,
+                          actor_prefix=f"{run_dir.name}-{os.getpid()}-",
                           seed=args.seed + 7919 * it0, device=args.device, demo=demo,
                           randomize=args.randomize, episode_seconds=args.episode_seconds,
                           oracle_reward=oracle, ground=args.ground,
@@ -190,7 +192,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                                args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
                                other_clips=_other_clips(args, run_dir),
                                adversarial_weight=args.adversarial_weight,
-                               warmup_updates=args.warmup_reward_updates)
+                               warmup_updates=args.warmup_reward_updates, rescale=args.reward_rescale)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
@@ -207,6 +209,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     t_start = time.time()                          # --minutes counts from here: prior fit and warm start included
     args, run_dir, data = _resolve(args, explicit)
     validate(args)
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        raise UserError("multi-GPU training (torchrun, WORLD_SIZE > 1) is not supported: each rank would learn "
+                        "its own distance model; run one process per GPU (docs/cluster.md)")
     if args.device.startswith("cuda") and not torch.cuda.is_available():
         raise UserError("--device cuda asked for, but torch sees no CUDA device")
     torch.manual_seed(args.seed)
@@ -215,6 +220,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         # One thread: the env workers own the other cores, and an oversubscribed torch is 10x slower.
         torch.set_num_threads(1)
     demo, env, runner = build(args, run_dir, data)
+    from virl_quad.envs.workers import EnvWorkerLost   # loaded by build with the envs
+
     log = RunLog(run_dir / "train.log")
     log(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
         f"run_dir={run_dir}")
@@ -239,6 +246,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             _warm_start(args, demo, runner, log)
         left = max(args.minutes - (time.time() - t_start) / 60.0, 1e-6) if args.minutes else 0.0   # min
         runner.train(args.iterations, left, args.save_every, args.eval_every, log=log)
+    except EnvWorkerLost as e:
+        raise UserError(f"{e}; checkpoint written at iteration {runner.current_learning_iteration}: continue "
+                        f"with --resume {run_dir}") from None
     finally:
         env.close()
     finish(args, run_dir, demo, runner, log)

@@ -211,3 +211,11 @@ def test_ctrl_c_checkpoints_without_a_traceback(tmp_path: Path) -> None:
     assert err.strip() == "interrupted", err
     assert "interrupted: checkpoint written at iteration" in out
     assert checkpoint.load(run_dir)["iteration"] >= 2
+
+
+def test_torchrun_is_refused_in_one_line(tmp_path: Path) -> None:
+    """Under torchrun (WORLD_SIZE > 1) every rank would learn its own distance model: refused."""
+    p = subprocess.run([sys.executable, "-m", "virl_quad.train", "--run-dir", str(tmp_path / "run")],
+                       capture_output=True, text=True, timeout=120, env={**os.environ, "WORLD_SIZE": "2"})
+    assert p.returncode == 2 and p.stderr.startswith("error: multi-GPU training"), p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and not (tmp_path / "run").exists()

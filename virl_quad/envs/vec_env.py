@@ -1,9 +1,12 @@
-"""rsl-rl VecEnv over N PyBullet environments spread across worker processes.
+"""rsl-rl VecEnv over N PyBullet environments spread across workers.
 
-Each worker process hosts a slice of the envs and steps them in a loop; the
-main process sends one message per step (actions and which envs time out)
-and gets stacked arrays back, so two cores really run two slices at once.
-``num_workers=0`` keeps everything in this process (debugging, tests).
+Each worker hosts a slice of the envs and steps them in a loop; the main
+process sends one message per step (actions and which envs time out) and gets
+stacked arrays back, so two cores really run two slices at once. Workers are
+processes on this host (``workers_kind="local"``, the default; ``num_workers=0``
+keeps everything in this process: debugging, tests) or Ray actors on a cluster
+(``"ray"``, see :mod:`virl_quad.envs.ray_workers`); a lost worker raises
+:class:`EnvWorkerLost`.
 
 Semantics rsl-rl relies on:
 - ``step`` auto-resets every env that terminated or timed out, and returns
@@ -17,9 +20,7 @@ Semantics rsl-rl relies on:
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import signal
-import traceback
+import os
 from typing import Any
 
 import numpy as np
@@ -28,76 +29,23 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from virl_quad.envs import make
+from virl_quad.envs.workers import EnvWorkerLost, InProcess, Processes
 
-_IMAGE_KEYS = ("agent_image", "expert_image")
-
-
-class _Slice:
-    """A group of envs stepped together (runs inside a worker or in-process)."""
-
-    def __init__(self, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
-        self.envs = [make(robot, time_limit=False, **overrides) for _ in env_ids]
-        self.seeds = [seed + i for i in env_ids]
-
-    def reset_all(self) -> dict:
-        """Reset every env with its own seed; stacked observations."""
-        obs = [env.reset(seed=s)[0] for env, s in zip(self.envs, self.seeds)]
-        return _stack(obs)
-
-    def step(self, actions: np.ndarray, time_outs: np.ndarray) -> tuple:
-        """Step every env, resetting those that ended: (obs, final frames, terminated, rewards)."""
-        obs, final, terminated = [], [], np.zeros(len(self.envs), bool)
-        rewards = np.zeros(len(self.envs))
-        for i, env in enumerate(self.envs):
-            o, rewards[i], term, _, _ = env.step(actions[i])
-            terminated[i] = term
-            final.append({k: o[k] for k in _IMAGE_KEYS if k in o})
-            if term or time_outs[i]:
-                o, _ = env.reset()
-            obs.append(o)
-        return _stack(obs), _stack(final), terminated, rewards
-
-    def close(self) -> None:
-        """Release every env."""
-        for env in self.envs:
-            env.close()
+__all__ = ["QuadrupedVecEnv", "EnvWorkerLost", "WORKER_KINDS"]
 
 
-def _stack(dicts: list[dict]) -> dict:
-    return {k: np.stack([d[k] for d in dicts]) for k in dicts[0]} if dicts and dicts[0] else {}
-
-
-def _worker(conn, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
-    """Worker process loop: build a slice, then serve commands until 'close'. Ctrl-C is the
-    parent's to handle (it checkpoints and closes the workers): a worker ignores SIGINT."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    torch.set_num_threads(1)
-    try:
-        sl = _Slice(robot, env_ids, seed, overrides)
-        conn.send(("ok", None))
-    except Exception as exc:  # report construction errors to the parent, one line
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
-        return
-    while True:
-        cmd, payload = conn.recv()
-        try:
-            if cmd == "reset_all":
-                conn.send(("ok", sl.reset_all()))
-            elif cmd == "step":
-                conn.send(("ok", sl.step(*payload)))
-            elif cmd == "close":
-                sl.close()
-                conn.send(("ok", None))
-                return
-        except Exception as exc:
-            conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
+#: where a slice of envs runs: "local" (processes on this host, or this process with
+#: num_workers=0) or "ray" (actors on a Ray cluster)
+WORKER_KINDS = ("local", "ray")
 
 
 class QuadrupedVecEnv(VecEnv):
-    """``num_envs`` quadruped envs for rsl-rl, over ``num_workers`` processes."""
+    """``num_envs`` quadruped envs for rsl-rl, over ``num_workers`` workers of ``workers_kind``
+    (local processes, or Ray actors on the cluster at ``ray_address``, named with ``actor_prefix``)."""
 
     def __init__(self, robot: str, num_envs: int, *, num_workers: int | None = None, seed: int = 0,
-                 device: str = "cpu", episode_seconds: float | None = None, **overrides: Any) -> None:
+                 device: str = "cpu", episode_seconds: float | None = None, workers_kind: str = "local",
+                 ray_address: str | None = None, actor_prefix: str = "", **overrides: Any) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         probe = make(robot, **overrides)  # validates the robot and overrides here, with a clear error
@@ -115,54 +63,31 @@ class QuadrupedVecEnv(VecEnv):
                     **{k: v for k, v in overrides.items() if k not in ("demo", "tg")},
                     "tg": None if self.contract.tg is None else self.contract.tg.to_dict()}
         self.spec = spec
-        workers = min(num_envs, mp.cpu_count()) if num_workers is None else num_workers
-        ids = np.array_split(np.arange(num_envs), max(workers, 1))
+        workers = min(num_envs, os.cpu_count() or 1) if num_workers is None else num_workers
+        if workers_kind not in WORKER_KINDS:
+            raise ValueError(f"unknown workers {workers_kind!r}; choose one of: {', '.join(WORKER_KINDS)}")
+        ids = [chunk.tolist() for chunk in np.array_split(np.arange(num_envs), max(workers, 1))]
         self._bounds = np.cumsum([0] + [len(i) for i in ids])
-        self._local: _Slice | None = None
-        self._procs, self._conns = [], []
-        if workers == 0:
-            self._local = _Slice(robot, list(range(num_envs)), seed, overrides)
+        if workers_kind == "ray":
+            from virl_quad.envs.ray_workers import RayActors   # Ray is an extra: imported only when asked for
+
+            self._workers = RayActors(robot, ids, seed, overrides, address=ray_address, prefix=actor_prefix)
+        elif workers == 0:
+            self._workers = InProcess(robot, ids, seed, overrides)
+            self._bounds = np.array([0, num_envs])
         else:
-            ctx = mp.get_context("spawn")
-            # a new process inherits an ignored SIGINT, so a Ctrl-C while it starts up is not its to report
-            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-            try:
-                for chunk in ids:
-                    parent, child = ctx.Pipe()
-                    p = ctx.Process(target=_worker, args=(child, robot, chunk.tolist(), seed, overrides),
-                                    daemon=True)
-                    p.start()
-                    self._procs.append(p)
-                    self._conns.append(parent)
-            finally:
-                signal.signal(signal.SIGINT, previous)
-            self._gather()  # construction acknowledgements
+            self._workers = Processes(robot, ids, seed, overrides)
         self._obs = self._to_tensordict(self._call("reset_all"))
 
     # -- worker plumbing -------------------------------------------------------------------------
-    def _gather(self) -> list:
-        out = []
-        for conn in self._conns:
-            status, payload = conn.recv()
-            if status == "error":
-                self.close()
-                raise RuntimeError(f"env worker failed: {payload}")
-            out.append(payload)
-        return out
-
     def _call(self, cmd: str, *per_worker_args) -> Any:
-        if self._local is not None:
-            return getattr(self._local, cmd)(*[a[0] for a in per_worker_args])
-        for w, conn in enumerate(self._conns):
-            conn.send((cmd, tuple(a[w] for a in per_worker_args)))
-        parts = self._gather()
+        args = [tuple(a[w] for a in per_worker_args) for w in range(len(self._bounds) - 1)]
+        parts = self._workers.call(cmd, args)
         if isinstance(parts[0], dict):
-            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+            return _concat(parts)
         return tuple(_concat([p[i] for p in parts]) for i in range(len(parts[0])))
 
     def _split(self, x: np.ndarray) -> list[np.ndarray]:
-        if self._local is not None:
-            return [x]
         return [x[a:b] for a, b in zip(self._bounds[:-1], self._bounds[1:])]
 
     def _to_tensordict(self, obs: dict) -> TensorDict:
@@ -198,20 +123,9 @@ class QuadrupedVecEnv(VecEnv):
 
     def close(self) -> None:
         """Stop the workers and release the physics clients."""
-        if self._local is not None:
-            self._local.close()
-            self._local = None
-        for conn in self._conns:
-            try:
-                conn.send(("close", ()))
-                conn.recv()
-            except (OSError, EOFError, BrokenPipeError):
-                pass
-        for p in self._procs:
-            p.join(timeout=5)
-            if p.is_alive():
-                p.terminate()
-        self._procs, self._conns = [], []
+        workers, self._workers = getattr(self, "_workers", None), None
+        if workers is not None:
+            workers.close()
 
     def __del__(self) -> None:
         try:

@@ -16,6 +16,9 @@ REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
 #: rewards that need no frames: the env's ground-truth score (oracle) or survival alone (prior)
 FRAMELESS_REWARDS = ("oracle", "prior")
 PRIOR_SOURCES = ("video", "motion")
+#: where env workers run (the backends of virl_quad.envs.vec_env, which this module does not
+#: import: it would load the simulator)
+WORKER_KINDS = ("local", "ray")
 
 
 @dataclass
@@ -29,7 +32,13 @@ class TrainArgs:
         "pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and "
         "warm start give alone)", choices=REWARDS)
     num_envs: int = opt(16, "parallel simulated robots")
-    num_workers: int = opt(-1, "env worker processes (-1: one per CPU core)")
+    num_workers: int = opt(-1, "env workers (-1: one per CPU core of this machine; with --workers ray, set it to "
+                                "the cluster's CPUs to use)")
+    workers: str = opt("local",
+        "where the env workers run: local (processes on this machine) or ray (Ray actors on the cluster "
+        "at --ray-address; pip install -e \".[cluster]\")", choices=WORKER_KINDS)
+    ray_address: str = opt("", "with --workers ray: the cluster to join (auto: the one `ray start` began "
+                               "on this machine; host:port; empty: start a local one)")
     iterations: int = opt(1000,
         "PPO iterations the run ends at, in total: on --resume the ones already done count (an upper "
         "bound when --minutes is given)")
@@ -86,6 +95,10 @@ class TrainArgs:
         "distance-model updates per iteration while the actor is frozen (--critic-warmup), when more "
         "than --reward-updates: the reward separates agent from demonstration before the policy first "
         "follows it")
+    reward_rescale: bool = opt(False,
+        "learned rewards: divide d^2 by max(1, |w_d| x the rollout's mean agent d^2), so the typical "
+        "agent frame keeps reward 1/e when the distance model has pushed the agent far from the "
+        "demonstration (the paper: no division)")
     symmetry: bool = opt(False,
         "rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg:"
         " the mirror shifts the gait clock by the TG's leg offsets)")
@@ -122,6 +135,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
     if args.reward_wd >= 0:
         raise ValueError(f"--reward-wd must be negative (r = exp(w_d d^2)), got {args.reward_wd}")
+    if args.workers not in WORKER_KINDS:
+        raise ValueError(f"unknown --workers {args.workers!r}; choose one of: {', '.join(WORKER_KINDS)}")
     if args.prior_from not in PRIOR_SOURCES:
         raise ValueError(f"unknown --prior-from {args.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.ground not in GROUNDS:

@@ -42,12 +42,13 @@ class LearnedReward:
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
                  cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 warmup_updates: int = 0) -> None:
+                 warmup_updates: int = 0, rescale: bool = False) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
         self.warmup_updates = warmup_updates   # updates per rollout while the actor is frozen
+        self.rescale = rescale                 # r = exp(w_d d^2 / s), s from the rollout (see finish)
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
         self._agent: list[torch.Tensor] = []
@@ -73,8 +74,14 @@ class LearnedReward:
         t1 = time.perf_counter()
         # The rollout starts from the state the last one ended in (computed with the previous
         # weights); envs whose episode ended on the last step start fresh.
-        rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
+        d, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True, distances=True)
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
+        # With rescale, once the model has pushed the agent's frames beyond the demonstration's
+        # (mean d^2 above 1/|w_d|, where the paper's reward is 1/e), d^2 is measured in units of
+        # that mean: the rollout's typical frame keeps reward 1/e instead of sinking towards 0.
+        scale = max(1.0, float(d.square().mean()) * -self.model.cfg.w_d) if self.rescale else 1.0
+        rewards = self.model.reward_of(d, scale)
+        info["reward_scale"] = scale
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info

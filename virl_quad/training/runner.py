@@ -4,7 +4,7 @@ Per iteration: rollout (``alg.act`` -> ``env.step`` -> ``alg.process_env_step``)
 ``alg.compute_returns`` (where VirlPPO updates the distance model and recomputes
 rewards), ``alg.update``; then one progress line, TensorBoard scalars, a
 checkpoint every ``save_every`` iterations and a ground-truth evaluation every
-``eval_every``. Ctrl-C writes a checkpoint before leaving.
+``eval_every``. Ctrl-C, and a lost env worker, write a checkpoint before leaving.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import torch
 from rsl_rl.runners import OnPolicyRunner
 from tensordict import TensorDict
 
+from virl_quad.envs.workers import EnvWorkerLost
 from virl_quad.training import checkpoint
 
 
@@ -132,6 +133,9 @@ class VirlRunner(OnPolicyRunner):
         except KeyboardInterrupt:
             self.save_checkpoint()
             log(f"interrupted: checkpoint written at iteration {self.current_learning_iteration}")
+            raise
+        except EnvWorkerLost:
+            self.save_checkpoint()    # the rollout in flight is lost; the learning so far is not
             raise
         finally:
             self.writer.close()

@@ -1,0 +1,113 @@
+"""Env slices as Ray actors: a vector env whose envs run on the machines of a Ray cluster.
+
+Needs Ray (``pip install -e ".[cluster]"``). Each actor reserves one CPU and hosts one
+:class:`~virl_quad.envs.workers.Slice` with its own PyBullet clients; the trainer stays where it
+was started and sends each step's actions to every actor at once. Actors are named
+``<prefix>env-<k>`` in the ``virl_quad`` namespace, so an operator (or a test) can find them.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from virl_quad.envs.workers import EnvWorkerLost, Slice
+
+NAMESPACE = "virl_quad"
+
+
+def _ray():
+    """The ray module, or a one-line error naming the extra that installs it."""
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError('Ray workers need Ray: pip install -e ".[cluster]"') from None
+    return ray
+
+
+def connect(address: str | None = None) -> None:
+    """Join the Ray cluster at ``address`` (``auto``: the one started on this machine by ``ray
+    start``), or start a local one when ``address`` is None or empty; nothing if already joined."""
+    ray = _ray()
+    if ray.is_initialized():
+        return
+    try:
+        ray.init(address=address or None, namespace=NAMESPACE, include_dashboard=False,
+                 log_to_driver=False, logging_level=logging.WARNING, configure_logging=True)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise RuntimeError(f"cannot join the Ray cluster at {address!r}: {str(exc).splitlines()[0]}") from None
+
+
+class _SliceActor:
+    """One slice inside a Ray actor process (one torch thread: the actor owns one CPU)."""
+
+    def __init__(self, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
+        import torch
+
+        torch.set_num_threads(1)
+        self.slice = Slice(robot, env_ids, seed, overrides)
+
+    def ready(self) -> bool:
+        """True once the slice is built."""
+        return True
+
+    def call(self, cmd: str, args: tuple):
+        """The slice's result of ``cmd``."""
+        return getattr(self.slice, cmd)(*args)
+
+
+class RayActors:
+    """One slice per Ray actor (``address``: see :func:`connect`; ``prefix``: actor names)."""
+
+    def __init__(self, robot: str, ids: list[list[int]], seed: int, overrides: dict,
+                 address: str | None = None, prefix: str = "") -> None:
+        ray = _ray()
+        connect(address)
+        actor = ray.remote(num_cpus=1, max_restarts=0)(_SliceActor)
+        self.names = [f"{prefix}env-{k}" for k in range(len(ids))]
+        self.actors = [actor.options(name=name, namespace=NAMESPACE).remote(robot, chunk, seed, overrides)
+                       for name, chunk in zip(self.names, ids)]
+        try:
+            self._get([a.ready.remote() for a in self.actors])   # construction errors surface here
+        except Exception:
+            self.close()
+            raise
+
+    def _get(self, refs: list) -> list:
+        """Each actor's result in order: a lost actor raises EnvWorkerLost, an error in the
+        slice a one-line RuntimeError."""
+        ray = _ray()
+        try:
+            return ray.get(refs)            # one wait for all: the common case, the cheapest
+        except ray.exceptions.RayError:
+            pass
+        for k, ref in enumerate(refs):      # something failed: say which actor, and how
+            try:
+                ray.get(ref)
+            except ray.exceptions.RayActorError as exc:
+                why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                raise EnvWorkerLost(f"env worker {k} (Ray actor {self.names[k]}) was lost: {why}") from None
+            except ray.exceptions.RayTaskError as exc:
+                cause = exc.cause if getattr(exc, "cause", None) is not None else exc
+                raise RuntimeError(f"env worker failed: {type(cause).__name__}: {cause}") from None
+        raise RuntimeError("env worker failed: Ray reported an error no actor holds")
+
+    def call(self, cmd: str, per_worker_args: list[tuple]) -> list:
+        """Every actor's result of ``cmd``, in worker order (the actors run at once)."""
+        return self._get([a.call.remote(cmd, args) for a, args in zip(self.actors, per_worker_args)])
+
+    def close(self) -> None:
+        """Release the envs and end the actors (the cluster stays up)."""
+        if not self.actors:
+            return
+        ray = _ray()
+        refs = [a.call.remote("close", ()) for a in self.actors]
+        try:
+            ray.wait(refs, num_returns=len(refs), timeout=10)
+        except Exception:
+            pass
+        for a in self.actors:
+            try:
+                ray.kill(a)
+            except Exception:
+                pass
+        self.actors = []
