@@ -10,17 +10,20 @@ from __future__ import annotations
 
 import logging
 
+from virl_quad.cli import UserError
 from virl_quad.envs.workers import EnvWorkerLost, Slice
 
 NAMESPACE = "virl_quad"
+START_S = 300.0   # s an actor may take to start (Ray schedules it once the cluster has a free CPU)
+ANSWER_S = 120.0  # s an actor may take to answer one call before it counts as lost (a step takes ms)
 
 
 def _ray():
-    """The ray module, or a one-line error naming the extra that installs it."""
+    """The ray module, or a one-line UserError naming the extra that installs it."""
     try:
         import ray
     except ImportError:
-        raise RuntimeError('Ray workers need Ray: pip install -e ".[cluster]"') from None
+        raise UserError('Ray workers need Ray: pip install -e ".[cluster]"') from None
     return ray
 
 
@@ -34,7 +37,7 @@ def connect(address: str | None = None) -> None:
         ray.init(address=address or None, namespace=NAMESPACE, include_dashboard=False,
                  log_to_driver=False, logging_level=logging.WARNING, configure_logging=True)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        raise RuntimeError(f"cannot join the Ray cluster at {address!r}: {str(exc).splitlines()[0]}") from None
+        raise UserError(f"cannot join the Ray cluster at {address!r}: {str(exc).splitlines()[0]}") from None
 
 
 class _SliceActor:
@@ -67,17 +70,24 @@ class RayActors:
         self.actors = [actor.options(name=name, namespace=NAMESPACE).remote(robot, chunk, seed, overrides)
                        for name, chunk in zip(self.names, ids)]
         try:
-            self._get([a.ready.remote() for a in self.actors])   # construction errors surface here
+            # construction errors surface here; a cluster without free CPUs keeps actors pending
+            self._get([a.ready.remote() for a in self.actors], timeout=START_S,
+                      hint=f" of starting (it needs one free CPU of the cluster, {len(ids)} in all)")
         except Exception:
             self.close()
             raise
 
-    def _get(self, refs: list) -> list:
-        """Each actor's result in order: a lost actor raises EnvWorkerLost, an error in the
-        slice a one-line RuntimeError."""
+    def _get(self, refs: list, timeout: float = ANSWER_S, hint: str = "") -> list:
+        """Each actor's result in order: a lost actor, or one silent for ``timeout`` s, raises
+        EnvWorkerLost; an error in the slice a one-line RuntimeError."""
         ray = _ray()
         try:
-            return ray.get(refs)            # one wait for all: the common case, the cheapest
+            return ray.get(refs, timeout=timeout)   # one wait for all: the common case, the cheapest
+        except ray.exceptions.GetTimeoutError:
+            ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
+            k = next(i for i, ref in enumerate(refs) if ref not in ready)
+            raise EnvWorkerLost(f"env worker {k} (Ray actor {self.names[k]}) did not answer within "
+                                f"{timeout:g} s{hint}") from None
         except ray.exceptions.RayError:
             pass
         for k, ref in enumerate(refs):      # something failed: say which actor, and how

@@ -164,9 +164,8 @@ class RewardModel:
         if state.num_envs != n or state.h.shape[-1] != self._lstm_units():
             raise ValueError(f"state is for {state.num_envs} envs of this variant, frames for {n}")
 
-    def reward_of(self, d: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
-        """r = exp(w_d d^2 / scale), clamped to [reward_floor, 1] (scale 1: the paper's reward)."""
-        return torch.exp(self.cfg.w_d * d.square() / scale).clamp(min=self.cfg.reward_floor, max=1.0)
+    def _reward(self, d: torch.Tensor) -> torch.Tensor:
+        return torch.exp(self.cfg.w_d * d.square()).clamp(min=self.cfg.reward_floor, max=1.0)
 
     def stream_step(self, agent, expert, state: StreamState, reset_mask=None
                     ) -> tuple[torch.Tensor, StreamState]:
@@ -186,16 +185,15 @@ class RewardModel:
             resets |= to_mask(reset_mask, "reset_mask", (n,), self.device)
         with eval_mode(self.reward_net):
             d, state = self._rollout(a[None], e[None], resets[None], state)
-        return self.reward_of(d[0]), state
+        return self._reward(d[0]), state
 
     def recompute(self, agent, expert, dones, start_state: StreamState, start_reset=None,
-                  return_state: bool = False, distances: bool = False):
+                  return_state: bool = False):
         """Rewards [T, N] of a whole rollout: frames [T, N, 48, 48], ``dones`` [T, N] (frame t ends an episode).
 
         ``start_state`` is the state the rollout's first stream_step received and
         ``start_reset`` [N] that step's reset mask. With ``return_state`` also
-        returns the state after the last frame (under the current weights); with
-        ``distances`` the distances d [T, N] instead of the rewards (see :meth:`reward_of`).
+        returns the state after the last frame (under the current weights).
         """
         a = self._float(agent, "agent", "TN")
         e = self._float(expert, "expert", "TN")
@@ -210,7 +208,7 @@ class RewardModel:
         resets = torch.cat([first[None], d_mask[:-1]], dim=0)
         with eval_mode(self.reward_net):
             d, state = self._rollout(a, e, resets, start_state)
-        r = d if distances else self.reward_of(d)
+        r = self._reward(d)
         return (r, state) if return_state else r
 
     def distance(self, expert, agent) -> torch.Tensor:

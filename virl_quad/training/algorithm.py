@@ -87,7 +87,7 @@ class VirlPPO(PPO):
         """Update the distance model, recompute this rollout's rewards, then GAE as usual."""
         st = self.storage
         with self._learning_threads(), torch.inference_mode(False), torch.enable_grad():
-            new_rewards, info = self.reward_source.finish(actor_frozen=self.frozen_updates > 0)
+            new_rewards, info = self.reward_source.finish()
         new_rewards = new_rewards.to(self.device, torch.float32).reshape(st.rewards.shape)
         time_outs = torch.stack(self._time_outs).reshape(st.rewards.shape)
         self._time_outs = []

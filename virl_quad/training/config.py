@@ -91,14 +91,6 @@ class TrainArgs:
     critic_warmup: int = opt(10,
         "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
         "advantages come from a critic that knows the warm-started policy")
-    warmup_reward_updates: int = opt(0,
-        "distance-model updates per iteration while the actor is frozen (--critic-warmup), when more "
-        "than --reward-updates: the reward separates agent from demonstration before the policy first "
-        "follows it")
-    reward_rescale: bool = opt(False,
-        "learned rewards: divide d^2 by max(1, |w_d| x the rollout's mean agent d^2), so the typical "
-        "agent frame keeps reward 1/e when the distance model has pushed the agent far from the "
-        "demonstration (the paper: no division)")
     symmetry: bool = opt(False,
         "rsl-rl symmetry augmentation: every PPO mini-batch also holds its left-right mirror (needs --tg:"
         " the mirror shifts the gait clock by the TG's leg offsets)")
@@ -123,7 +115,7 @@ def validate(args: TrainArgs) -> None:
     robots.get(args.robot)
     if args.reward not in REWARDS:
         raise ValueError(f"unknown reward {args.reward!r}; choose one of: {', '.join(REWARDS)}")
-    for name in ("warm_start_rounds", "critic_warmup", "warmup_reward_updates"):
+    for name in ("warm_start_rounds", "critic_warmup"):
         if getattr(args, name) < 0:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
     if not 0 <= args.critic_learning_rate <= 1:

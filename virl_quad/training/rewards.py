@@ -41,14 +41,11 @@ class LearnedReward:
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
-                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 warmup_updates: int = 0, rescale: bool = False) -> None:
+                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
-        self.warmup_updates = warmup_updates   # updates per rollout while the actor is frozen
-        self.rescale = rescale                 # r = exp(w_d d^2 / s), s from the rollout (see finish)
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
         self._agent: list[torch.Tensor] = []
@@ -62,26 +59,18 @@ class LearnedReward:
         self._expert.append(expert.cpu())
         self._dones.append(dones.bool().cpu())
 
-    def finish(self, actor_frozen: bool = False) -> tuple[torch.Tensor, dict[str, float]]:
-        """Dataset <- rollout; M model updates (``warmup_updates`` while ``actor_frozen``, if more);
-        rewards [T, N] recomputed with the updated model."""
+    def finish(self) -> tuple[torch.Tensor, dict[str, float]]:
+        """Dataset <- rollout; M model updates; rewards [T, N] recomputed with the updated model."""
         agent, expert, dones = torch.stack(self._agent), torch.stack(self._expert), torch.stack(self._dones)
         self._agent, self._expert, self._dones = [], [], []
         t0 = time.perf_counter()
         self.model.add_rollout(agent, expert, dones)
-        info = {f"distance/{k}": float(v) for k, v in self.model.update(
-            max(self.updates, self.warmup_updates) if actor_frozen else self.updates).items()}
+        info = {f"distance/{k}": float(v) for k, v in self.model.update(self.updates).items()}
         t1 = time.perf_counter()
         # The rollout starts from the state the last one ended in (computed with the previous
         # weights); envs whose episode ended on the last step start fresh.
-        d, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True, distances=True)
+        rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
-        # With rescale, once the model has pushed the agent's frames beyond the demonstration's
-        # (mean d^2 above 1/|w_d|, where the paper's reward is 1/e), d^2 is measured in units of
-        # that mean: the rollout's typical frame keeps reward 1/e instead of sinking towards 0.
-        scale = max(1.0, float(d.square().mean()) * -self.model.cfg.w_d) if self.rescale else 1.0
-        rewards = self.model.reward_of(d, scale)
-        info["reward_scale"] = scale
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
@@ -105,7 +94,7 @@ class EnvReward:
         """Keep the env's reward of this step."""
         self._rewards.append(rewards.detach().float().cpu().clone())
 
-    def finish(self, actor_frozen: bool = False) -> tuple[torch.Tensor, dict[str, float]]:
+    def finish(self) -> tuple[torch.Tensor, dict[str, float]]:
         """The rollout's env rewards [T, N]."""
         r = torch.stack(self._rewards)
         self._rewards = []
