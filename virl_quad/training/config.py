@@ -57,12 +57,14 @@ class TrainArgs:
     eval_seconds: float = opt(10.0, "s, length of an evaluation episode")
     episode_seconds: float = opt(10.0, "s, training episode time limit")
     randomize: bool = opt(True, "domain randomisation during training")
-    reward_updates: int = opt(2,
-        "distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)")
+    reward_updates: int = opt(1,
+        "distance-model batch updates per iteration (M in Algorithm 1); the reward's CPU cost grows with "
+        "updates x --reward-batch-pairs")
     reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
-    reward_batch_pairs: int = opt(16,
-        "pairs per distance-model update (half positive, half negative): more pairs give a distance that "
-        "varies less from run to run, at a CPU cost in proportion")
+    reward_batch_pairs: int = opt(64,
+        "pairs per distance-model update (half positive, half negative): with few pairs the learned "
+        "distance depends on the model's seed as much as on the data, and ranks the policy's close "
+        "variants by chance")
     reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
