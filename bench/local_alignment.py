@@ -22,29 +22,26 @@ import numpy as np
 import torch
 from scipy.stats import spearmanr
 
-from virl_quad import envs
 from virl_quad.evaluate import policy_callable
-from virl_quad.evaluation.rollout import record_episode
-from virl_quad.evaluation.score import score_trajectory
 from virl_quad.export import export
 from virl_quad.policy_io import load_policy
 from virl_quad.training import checkpoint
-from virl_quad.training.alignment import GradedRollout, rollout_rewards
+from virl_quad.training.alignment import Controller, GradedRollout, rollout, rollout_rewards
 
 NOISE = (0.0, 0.05, 0.1, 0.2, 0.3)   # action units (x the action scale: 0.5 rad on Pupper)
 RESIDUAL = (0.5, 0.0)                # the policy's action scaled by this (0: the TG alone)
 
 
-def variants(act) -> dict[str, callable]:
-    """name -> (obs, rng) -> action: the policy and its neighbours."""
-    def noisy(sigma: float):
-        def fn(obs: dict, rng: np.random.Generator) -> np.ndarray:
+def variants(act) -> dict[str, Controller]:
+    """name -> (env, rng, obs) -> action: the policy and its neighbours."""
+    def noisy(sigma: float) -> Controller:
+        def fn(env, rng: np.random.Generator, obs: dict) -> np.ndarray:
             x = np.asarray(act(obs))
             return x + rng.normal(0.0, sigma, x.shape)
         return fn
 
     out = {f"policy + noise {s:g}": noisy(s) for s in NOISE}
-    out.update({f"policy x {b:g}": (lambda obs, rng, b=b: b * np.asarray(act(obs))) for b in RESIDUAL})
+    out.update({f"policy x {b:g}": (lambda env, rng, obs, b=b: b * np.asarray(act(obs))) for b in RESIDUAL})
     return out
 
 
@@ -52,28 +49,13 @@ def record(run_dir: Path, seeds: int, seconds: float) -> tuple[list[GradedRollou
     """The variants' rollouts (frames and scores) and the run's reward model."""
     rm, demo, _, robot = checkpoint.load_reward_model(run_dir)
     policy = load_policy(export(run_dir, run_dir / "policy.pt"))
-    act = policy_callable(policy)
     ground = (demo.camera or {}).get("ground") or "checker"
     out = []
-    for name, fn in variants(act).items():
+    for name, fn in variants(policy_callable(policy)).items():
         for seed in range(seeds):
-            env = envs.make(robot, demo=demo, randomize=True, episode_seconds=seconds, ground=ground,
-                            **policy.contract.env_overrides())
-            rng = np.random.default_rng(seed)
-            agent, expert = [], []
-
-            def step(obs: dict) -> np.ndarray:
-                agent.append(obs["agent_image"])
-                expert.append(obs["expert_image"])
-                return fn(obs, rng)
-
-            try:
-                obs, _ = env.reset(seed=seed)
-                traj, times, _ = record_episode(env, step, obs)
-            finally:
-                env.close()
-            score = score_trajectory(traj, demo.motion, times, robot)["total"]
-            out.append(GradedRollout(name, seed, np.array(agent), np.array(expert), float(score)))
+            agent, expert, score = rollout(robot, demo, fn, seed, seconds, True, ground,
+                                           **policy.contract.env_overrides())
+            out.append(GradedRollout(name, seed, agent, expert, score))
     return out, rm
 
 
@@ -96,7 +78,7 @@ def main() -> int:
         rho = float(spearmanr(rewards, scores).statistic) if np.ptp(rewards) > 0 else 0.0
         print(f"{run} ({rm.cfg.variant}): {a.seeds} rollouts of {a.seconds:g} s per variant, randomised")
         print(f"  {'variant':<24}{'reward':>10}{'score':>8}")
-        for name in variants(lambda obs: 0.0):
+        for name in dict.fromkeys(r.controller for r in rollouts):
             idx = [i for i, r in enumerate(rollouts) if r.controller == name]
             print(f"  {name:<24}{np.mean([rewards[i] for i in idx]):10.4f}{np.mean([scores[i] for i in idx]):8.3f}")
         print(f"  rank correlation reward vs score over {len(rollouts)} rollouts: {rho:+.2f}", flush=True)

@@ -39,3 +39,20 @@ def gait_motions():
 def mae():
     """Mean absolute difference of two uint8 image stacks, in gray levels."""
     return lambda a, b: float(np.mean(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+
+
+@pytest.fixture(scope="session")
+def wait_for_checkpoint():
+    """``wait(proc, run_dir, iteration, seconds=240)``: poll until the training subprocess ``proc``
+    has a checkpoint at ``iteration`` or more in ``run_dir``, or has ended, or time is up."""
+    import time
+
+    from virl_quad.training import checkpoint
+
+    def wait(proc, run_dir: Path, iteration: int, seconds: float = 240.0) -> None:
+        deadline = time.time() + seconds
+        while time.time() < deadline and proc.poll() is None:
+            if (run_dir / checkpoint.LATEST).exists() and checkpoint.load(run_dir)["iteration"] >= iteration:
+                return
+            time.sleep(0.5)
+    return wait

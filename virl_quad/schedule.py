@@ -71,7 +71,7 @@ def train_all(args, jobs: list[Job]) -> dict[Path, dict]:
         else:
             job.run_dir.parent.mkdir(parents=True, exist_ok=True)
             todo.append(job)
-    if getattr(args, "workers", "local") == "ray":
+    if args.workers == "ray":
         out.update(_on_ray(args, todo))
         return out
     for job in todo:

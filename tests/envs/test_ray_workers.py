@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -74,7 +73,7 @@ def test_a_killed_actor_is_one_clear_error(cluster) -> None:
         env.close()
 
 
-def test_train_exits_2_with_a_checkpoint_when_an_actor_dies(cluster, tmp_path: Path) -> None:
+def test_train_exits_2_with_a_checkpoint_when_an_actor_dies(cluster, tmp_path: Path, wait_for_checkpoint) -> None:
     run_dir = tmp_path / "run"
     cmd = [sys.executable, "-m", "virl_quad.train", "--robot", "pupper", "--reward", "oracle", "--iterations", "500",
            "--num-envs", "2", "--num-workers", "2", "--steps-per-env", "8", "--eval-episodes", "1",
@@ -83,11 +82,7 @@ def test_train_exits_2_with_a_checkpoint_when_an_actor_dies(cluster, tmp_path: P
            "--workers", "ray", "--ray-address", cluster, "--run-dir", str(run_dir)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.time() + 240
-        while time.time() < deadline and proc.poll() is None:
-            if (run_dir / checkpoint.LATEST).exists() and checkpoint.load(run_dir)["iteration"] >= 2:
-                break
-            time.sleep(0.5)
+        wait_for_checkpoint(proc, run_dir, 2)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         ray.kill(ray.get_actor(f"run-{proc.pid}-env-0", namespace=NAMESPACE))
         out, err = proc.communicate(timeout=120)
@@ -98,3 +93,12 @@ def test_train_exits_2_with_a_checkpoint_when_an_actor_dies(cluster, tmp_path: P
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err[-3000:]
     assert err.startswith("error: env worker 0 (Ray actor run-") and f"--resume {run_dir}" in err, err
     assert checkpoint.load(run_dir)["iteration"] >= 2
+
+
+def test_worker_kinds_match_the_training_options() -> None:
+    """The training options list the backends the vector env has (kept apart so that the
+    options module does not load the simulator)."""
+    from virl_quad.envs.vec_env import WORKER_KINDS
+    from virl_quad.training.config import WORKER_KINDS as OPTION_KINDS
+
+    assert WORKER_KINDS == OPTION_KINDS

@@ -186,7 +186,7 @@ def test_reward_choice_is_checked() -> None:
     assert p.stderr.startswith("error: ") and len(p.stderr.strip().splitlines()) == 1, p.stderr
 
 
-def test_ctrl_c_checkpoints_without_a_traceback(tmp_path: Path) -> None:
+def test_ctrl_c_checkpoints_without_a_traceback(tmp_path: Path, wait_for_checkpoint) -> None:
     """A real SIGINT to the whole process group, as a terminal's Ctrl-C sends it: the env worker
     stays quiet, the trainer writes its checkpoint and exits 130 with one line."""
     run_dir = tmp_path / "run"
@@ -196,11 +196,7 @@ def test_ctrl_c_checkpoints_without_a_traceback(tmp_path: Path) -> None:
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        deadline = time.time() + 240
-        while time.time() < deadline and proc.poll() is None:
-            if (run_dir / checkpoint.LATEST).exists() and checkpoint.load(run_dir)["iteration"] >= 2:
-                break
-            time.sleep(0.5)
+        wait_for_checkpoint(proc, run_dir, 2)
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=120)
     finally:

@@ -24,7 +24,7 @@ from scipy.stats import spearmanr
 
 SKIP = 10  # first frames of an episode left out (the sequence encoder warms up)
 
-Controller = Callable[[object, np.random.Generator], np.ndarray]   # (env, rng) -> action (12)
+Controller = Callable[[object, np.random.Generator, dict], np.ndarray]   # (env, rng, obs) -> action
 
 
 @dataclass
@@ -45,26 +45,27 @@ def controllers(robot: str, cycle: float, gait: str = "trot") -> dict[str, Contr
     from virl_quad.evaluation.tracker import tracker_action
 
     others = {g: demo_lib.load(g, robot).motion for g in ("trot", "pace", "bound") if g != gait}
-    out: dict[str, Controller] = {"standing still": lambda env, rng: np.zeros(12),
-                                  "random actions": lambda env, rng: rng.uniform(-1.0, 1.0, 12)}
+    out: dict[str, Controller] = {"standing still": lambda env, rng, obs: np.zeros(12),
+                                  "random actions": lambda env, rng, obs: rng.uniform(-1.0, 1.0, 12)}
     for alpha in (0.25, 0.5, 0.75, 1.0):
-        out[f"tracker, alpha {alpha:g}"] = lambda env, rng, a=alpha: a * tracker_action(env)
+        out[f"tracker, alpha {alpha:g}"] = lambda env, rng, obs, a=alpha: a * tracker_action(env)
     for sigma in (0.3, 0.6):
-        out[f"tracker + noise {sigma:g}"] = lambda env, rng, s=sigma: tracker_action(env) + rng.normal(0.0, s, 12)
-    out["tracker, half a cycle late"] = lambda env, rng: tracker_action(env, delay=0.5 * cycle)
+        out[f"tracker + noise {sigma:g}"] = lambda env, rng, obs, s=sigma: tracker_action(env) + rng.normal(0.0, s, 12)
+    out["tracker, half a cycle late"] = lambda env, rng, obs: tracker_action(env, delay=0.5 * cycle)
     for g, m in others.items():
-        out[f"tracking the {g}"] = lambda env, rng, m=m: tracker_action(env, motion=m)
+        out[f"tracking the {g}"] = lambda env, rng, obs, m=m: tracker_action(env, motion=m)
     return out
 
 
 def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, randomize: bool,
-            ground: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """(agent frames, expert frames, ground-truth total) of one episode of ``act``."""
+            ground: str, **overrides) -> tuple[np.ndarray, np.ndarray, float]:
+    """(agent frames, expert frames, ground-truth total) of one episode of ``act`` (``overrides``:
+    further env options, e.g. a policy's action contract)."""
     from virl_quad import envs
     from virl_quad.evaluation.rollout import record_episode
     from virl_quad.evaluation.score import score_trajectory
 
-    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground)
+    env = envs.make(robot, demo=demo, randomize=randomize, episode_seconds=seconds, ground=ground, **overrides)
     rng = np.random.default_rng(seed)
     agent, expert = [], []
 
@@ -72,7 +73,7 @@ def rollout(robot: str, demo, act: Controller, seed: int, seconds: float, random
         """The controller's action; keeps the frames the reward would see at this step."""
         agent.append(obs["agent_image"])
         expert.append(obs["expert_image"])
-        return act(env, rng)
+        return act(env, rng, obs)
 
     try:
         obs, _ = env.reset(seed=seed)
