@@ -191,7 +191,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         source = LearnedReward(args.reward, demo.frames, args.num_envs, args.reward_updates, args.seed,
                                args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
                                other_clips=_other_clips(args, run_dir),
-                               adversarial_weight=args.adversarial_weight)
+                               adversarial_weight=args.adversarial_weight, w_gp=args.reward_gp)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),

@@ -70,6 +70,8 @@ class RewardConfig:
     vae_beta: float = 1e-3            # KL weight inside L_VAEI; reconstruction is a per-pixel
                                       # mean, KL a sum over latent dims (project choice)
 
+    w_gp: float = 0.0                 # gradient penalty: the squared input gradient of the pair
+                                      # distance (losses.gradient_penalty); 0: off, as in the paper
     ae_frames: int = 128              # frames decoded per update for each of L_RAES and L_VAEI: a
                                       # random subset (unbiased for the mean); 0 = all (CPU cost)
 
@@ -133,6 +135,8 @@ class RewardConfig:
             raise ValueError("margin, lr and grad_clip must be positive")
         if not 0.0 <= self.ema < 1.0:
             raise ValueError(f"ema must be in [0, 1), got {self.ema}")
+        if self.w_gp < 0:
+            raise ValueError(f"w_gp must be >= 0, got {self.w_gp}")
         if self.ae_frames < 0:
             raise ValueError(f"ae_frames must be >= 0, got {self.ae_frames}")
         if self.max_bytes <= 0 or self.max_episode_frames < 2:
@@ -178,6 +182,7 @@ def without_retired(d: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in d.items() if k not in RETIRED_FIELDS}
     out.setdefault("paint_background", False)        # saved before backgrounds were painted
     out.setdefault("ema", 0.0)                       # saved before rewards came from a slow copy
+    out.setdefault("w_gp", 0.0)                      # saved before the gradient penalty existed
     if isinstance(out.get("pair_weights"), dict):
         out["pair_weights"] = {k: v for k, v in out["pair_weights"].items() if k not in RETIRED_PAIRS}
     return out

@@ -108,6 +108,27 @@ def unique_frames(frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return frames[first], inverse
 
 
+GP_PAIRS = 4     # pairs of a batch whose input gradient is penalised (CPU cost)
+GP_FRAMES = 16   # frames, the last ones of each window, that the penalty differentiates through
+
+
+def gradient_penalty(model: DistanceModel, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Squared L2 norm of the gradient of a pair's summed per-step distance (frame term, plus the
+    sequence term when the model has one: the distance the reward uses) with respect to the
+    frames of both windows, mean over :data:`GP_PAIRS` pairs; a, b [T, B, H, W] in [0, 1].
+    A smooth distance ranks near behaviours by how near they are (AMP's gradient penalty)."""
+    a = a[-GP_FRAMES:, :GP_PAIRS].detach().clone().requires_grad_(True)
+    b = b[-GP_FRAMES:, :GP_PAIRS].detach().clone().requires_grad_(True)
+    n = a.shape[1]
+    mu, _ = model.encode_frames(torch.cat([a, b], dim=1))             # [T, 2n, D]
+    d = ((mu[:, :n] - mu[:, n:]).pow(2).sum(-1) + 1e-8).sqrt()
+    if model.omega is not None:
+        h, _ = model.encode_sequence(mu)
+        d = d + ((h[:, :n] - h[:, n:]).pow(2).sum(-1) + 1e-8).sqrt()
+    ga, gb = torch.autograd.grad(d.sum(), [a, b], create_graph=True)
+    return (ga.pow(2).sum(dim=(0, 2, 3)) + gb.pow(2).sum(dim=(0, 2, 3))).mean()
+
+
 def total_loss(model: DistanceModel, a: torch.Tensor, b: torch.Tensor, y: torch.Tensor
                ) -> tuple[torch.Tensor, dict[str, float]]:
     """Weighted VIRL loss of a batch of pairs; a, b [T, B, H, W] in [0, 1], y [B] in {0, 1}.
@@ -137,6 +158,9 @@ def total_loss(model: DistanceModel, a: torch.Tensor, b: torch.Tensor, y: torch.
     if cfg.uses_decoders:
         parts["vaei"] = vaei_loss(model, mu_u, logvar_u, uniq, cfg.vae_beta, cfg.ae_frames)
         weights["vaei"] = cfg.w_vaei
+    if cfg.w_gp > 0:
+        parts["gp"] = gradient_penalty(model, a, b)
+        weights["gp"] = cfg.w_gp
     loss = sum(weights[k] * parts[k] for k in parts)
     logs = {k: float(v.detach()) for k, v in parts.items()}
     logs["total"] = float(loss.detach())

@@ -68,6 +68,9 @@ class TrainArgs:
         "ground the camera sees in demonstration renders and agent frames: checker (forward progress "
         "visible to a person) or plain; the distance model paints either white "
         "(RewardConfig.paint_background)", choices=GROUNDS)
+    reward_gp: float = opt(0.0,
+        "gradient-penalty weight of the distance model: the squared gradient of a pair's distance with "
+        "respect to its frames (AMP's stabiliser; 0: off, as in the paper)")
     adversarial_weight: float = opt(0.1,
         "sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): "
         "higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves "
@@ -133,6 +136,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --prior-from {args.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.ground not in GROUNDS:
         raise ValueError(f"unknown --ground {args.ground!r}; choose one of: {', '.join(GROUNDS)}")
+    if args.reward_gp < 0:
+        raise ValueError(f"--reward-gp must be >= 0, got {args.reward_gp}")
     if args.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.adversarial_weight}")
     if args.minutes < 0 or args.episode_seconds <= 0 or args.eval_seconds <= 0:
