@@ -68,7 +68,7 @@ def main() -> None:
         raise SystemExit("the run's demonstration has no reference motion to re-render")
     n, idx = a.steps, np.arange(a.steps) % demo.num_frames
     expert = demo.frames[idx]
-    w_d = rm.cfg.w_d
+    w_d = rm.cfg.reward.w_d
 
     def row(name: str, agent: np.ndarray, ref: np.ndarray = expert) -> None:
         d = rm.distance(torch.from_numpy(ref[:, None]), torch.from_numpy(agent[:, None]))[10:, 0].numpy()

@@ -220,7 +220,7 @@ def evaluate(rm, src: FrameSource, rng: np.random.Generator, anchors: int) -> di
 
 def train(variant: str, demo: np.ndarray, episodes, seconds: float, seed: int, clips):
     """Build and train a model of ``variant`` for ``seconds`` of wall time; return it with stats."""
-    cfg = RewardConfig(variant=variant, clips_cyclic=True)
+    cfg = RewardConfig.make(variant=variant, clips_cyclic=True)
     rm = build_reward(cfg, demo, clips, seed=seed)
     for agent, expert, _ in episodes:
         rm.add_episode(agent, expert)

@@ -46,7 +46,7 @@ def fresh_model(a: argparse.Namespace):
     demo = demo_lib.load(gait, robot, ground=a.ground)
     clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
-    cfg = RewardConfig(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
+    cfg = RewardConfig.make(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
     rm = build_reward(cfg, demo.frames, clips, 0, "cpu")
     for name, act in controllers(robot, float(demo.motion.duration), gait).items():
         for seed in range(1000, 1000 + a.train_seeds):

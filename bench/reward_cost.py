@@ -70,7 +70,7 @@ def main() -> None:
     N, T = args.num_envs, args.steps
     rng = np.random.default_rng(0)
     demo = rng.integers(0, 256, (200, 48, 48), dtype=np.uint8)
-    cfg = RewardConfig(variant=args.variant)
+    cfg = RewardConfig.make(variant=args.variant)
     rm = build_reward(cfg, demo, None, seed=0)
     for _ in range(20):   # 500-frame episodes: EESP windows up to window_max
         rm.add_episode(rng.integers(0, 256, (500, 48, 48), dtype=np.uint8), demo[np.arange(500) % 200])
@@ -100,7 +100,7 @@ def main() -> None:
     print(f"  streaming reward step ({N} envs)        : {ms_stream:8.2f} ms   ({ms_stream * 1000 / N:.0f} us/env)")
     print(f"  batch recompute [{T}, {N}]               : {ms_batch:8.2f} ms   "
           f"(vs {T} streaming steps {T * ms_stream:.1f} ms)")
-    print(f"  model update ({cfg.batch_pairs} pairs = {2 * cfg.batch_pairs} sequences, mean window "
+    print(f"  model update ({cfg.pairs.batch_pairs} pairs = {2 * cfg.pairs.batch_pairs} sequences, mean window "
           f"{np.mean(windows):.1f} frames): {ms_update:8.2f} ms")
     print(f"  store one rollout in the dataset        : {ms_store:8.2f} ms "
           f"({store.dataset.bytes_per_frame:.0f} B per stored frame)")

@@ -38,14 +38,14 @@ _RATE = re.compile(r"training loop\s*:\s*([0-9.]+) env steps/s")
 
 def bare_vec_env_rate(args: TrainArgs, demo, workers: int, steps: int) -> float:
     """Env steps/s of the VecEnv alone (zero actions), same configuration as training."""
-    env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=workers, seed=1, demo=demo,
-                          randomize=args.randomize)
-    a = torch.zeros(args.num_envs, env.num_actions)
+    env = QuadrupedVecEnv(args.run.robot, args.env.num_envs, num_workers=workers, seed=1, demo=demo,
+                          randomize=args.env.randomize)
+    a = torch.zeros(args.env.num_envs, env.num_actions)
     env.step(a)
     t = time.perf_counter()
     for _ in range(steps):
         env.step(a)
-    rate = args.num_envs * steps / (time.perf_counter() - t)
+    rate = args.env.num_envs * steps / (time.perf_counter() - t)
     env.close()
     return rate
 
@@ -78,16 +78,16 @@ def measure(args: TrainArgs, iterations: int) -> tuple[float, float, dict[str, f
         phases["PPO update"] += t3 - t2
     total = time.perf_counter() - t_all
     env.close()
-    rate = iterations * args.num_envs * args.steps_per_env / total
-    bare = bare_vec_env_rate(args, demo, args.num_workers, args.steps_per_env * 2)
+    rate = iterations * args.env.num_envs * args.ppo.steps_per_env / total
+    bare = bare_vec_env_rate(args, demo, args.env.num_workers, args.ppo.steps_per_env * 2)
     return rate, bare, {k: v / iterations for k, v in phases.items()}
 
 
 def measure_here(a: argparse.Namespace) -> None:
     """Measure this tree's loop with its defaults; print the rate and the phases."""
     torch.set_num_threads(1)
-    args = TrainArgs(robot=a.robot, reward=a.reward, num_envs=a.num_envs, steps_per_env=a.steps_per_env,
-                     num_workers=a.workers, warm_start_rounds=0)
+    args = TrainArgs.make(robot=a.robot, reward=a.reward, num_envs=a.num_envs, steps_per_env=a.steps_per_env,
+                          num_workers=a.workers, warm_start_rounds=0)
     rate, bare, phases = measure(args, a.iterations)
     print(f"  training loop       : {rate:8.1f} env steps/s")
     print(f"  bare VecEnv         : {bare:8.1f} env steps/s   (loop / bare {rate / bare:.2f})")

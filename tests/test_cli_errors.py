@@ -15,6 +15,8 @@ BAD = [
     ("virl_quad.train", ["--robot", "dog"], "unknown robot"),
     ("virl_quad.train", ["--demo", "missing.mp4"], "not found"),
     ("virl_quad.train", ["--resume", "no/such/run"], "does not exist"),
+    ("virl_quad.train", ["--workers", "ray", "--ray-address", "127.0.0.1:1"], "cannot reach a Ray cluster"),
+    ("virl_quad.train", ["--workers", "ray", "--ray-address", "headnode"], "HOST:PORT"),
     ("virl_quad.check", ["--robot", "dog"], "unknown robot 'dog'"),
     ("virl_quad.check", ["--samples", "0"], "--samples"),
     ("virl_quad.evaluate", [], "--policy"),

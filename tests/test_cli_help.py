@@ -18,13 +18,18 @@ def test_help(module: str) -> None:
     assert "usage:" in p.stdout and "Traceback" not in p.stderr
 
 
-def test_train_help_lists_every_option_with_its_meaning() -> None:
+def test_train_help_lists_every_option_with_its_meaning_by_concern() -> None:
     import dataclasses
 
+    from virl_quad.cli import options
     from virl_quad.training.config import TrainArgs
 
     out = subprocess.run([sys.executable, "-m", "virl_quad.train", "--help"], capture_output=True, text=True,
                          timeout=120).stdout
-    for f in dataclasses.fields(TrainArgs):
-        assert "--" + f.name.replace("_", "-") in out, f.name
+    for name in options(TrainArgs()):
+        assert "--" + name.replace("_", "-") in out, name
     assert "distance-model batch updates per iteration" in out
+    for section in dataclasses.fields(TrainArgs):        # one group per concern, its options under it
+        title = out.index(f"\n{section.name} (")
+        first = dataclasses.fields(getattr(TrainArgs(), section.name))[0].name.replace("_", "-")
+        assert out.index(f"--{first}", title) > title, section.name

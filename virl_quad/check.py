@@ -10,22 +10,29 @@ and its figures. Exit status: 0 all checks pass, 1 some check fails,
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
+from dataclasses import dataclass
 
 from virl_quad import robots
-from virl_quad.cli import Parser
+from virl_quad.cli import opt, parser_from_dataclass
 from virl_quad.quiet import quiet_fd
 
 CHOICES = (*robots.names(), "all")
 
 
-def _parser() -> Parser:
-    p = Parser(prog="python -m virl_quad.check", description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", default="all", metavar="{" + ",".join(CHOICES) + "}", help="robot to check")
-    p.add_argument("--samples", type=int, default=100, help="random configurations for the FK comparison")
-    p.add_argument("--seed", type=int, default=0, help="random seed")
-    return p
+@dataclass
+class CheckArgs:
+    """Options of ``python -m virl_quad.check``."""
+
+    robot: str = opt("all", "robot to check: " + ", ".join(CHOICES))
+    samples: int = opt(100, "random configurations for the FK comparison")
+    seed: int = opt(0, "random seed")
+
+
+def _parser() -> argparse.ArgumentParser:
+    return parser_from_dataclass(CheckArgs, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.check")
 
 
 def format_mapping(report) -> list[str]:

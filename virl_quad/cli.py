@@ -4,7 +4,11 @@
   block) and every option's default in its help; every entry module uses it.
 - :func:`opt`: a dataclass field that carries its command-line help (and choices).
 - :func:`parser_from_dataclass`: a :class:`Parser` with one option per field of such a
-  dataclass (cleanrl's pattern: the dataclass is the CLI and its documentation).
+  dataclass (cleanrl's pattern: the dataclass is the CLI and its documentation); a field that
+  is itself such a dataclass is a section (one concern) whose options form a group in the help.
+  Option names are flat and unique across sections (``--reward-lr``, not ``--distance.reward-lr``).
+- :func:`options`, :func:`from_options`, :func:`replace_options`: the same options as one flat
+  ``{name: value}`` dict (how a run's configuration is saved), and back.
 - :func:`run_main`: run a ``main`` and turn expected failures (bad input) into one
   line on stderr and exit code 2, never a traceback.
 """
@@ -45,50 +49,127 @@ class Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def opt(default: Any, help: str, choices: Sequence[str] | None = None) -> Any:
+def opt(default: Any, help: str, choices: Sequence[str] | None = None, positional: bool = False,
+        required: bool = False) -> Any:
     """A dataclass field with default ``default`` whose ``--option`` shows ``help`` (and accepts
-    only ``choices``, when given)."""
-    meta: dict[str, Any] = {"help": help}
+    only ``choices``, when given); ``positional``: a positional argument instead; ``required``:
+    the command line must give it (the default then only serves code that builds the dataclass).
+    Only fields made with :func:`opt` appear on the command line."""
+    meta: dict[str, Any] = {"help": help, "positional": positional, "required": required}
     if choices is not None:
         meta["choices"] = tuple(choices)
     return dataclasses.field(default=default, metadata=meta)
 
 
-def _arg_type(tp: Any) -> Callable | None:
-    """The argparse converter of a field annotation; None for a bool (a --flag/--no-flag switch)."""
+def _arg_type(tp: Any) -> tuple[Callable | None, bool]:
+    """(argparse converter, repeatable) of a field annotation: converter None for a bool (a
+    --flag/--no-flag switch); a list is a repeatable option of its items."""
     args = [a for a in typing.get_args(tp) if a is not type(None)]
     base = args[0] if len(args) == 1 else tp  # "X | None" -> X
+    if typing.get_origin(base) is list:
+        item = (typing.get_args(base) or (str,))[0]
+        return (item if item in (int, float, str) else str), True
     if base is bool:
-        return None
-    return base if base in (int, float, str) else str
+        return None, False
+    return (base if base in (int, float, str) else str), False
 
 
 def _help(f: dataclasses.Field) -> str:
     return str(f.metadata.get("help", "")).replace("%", "%%")   # argparse formats help with %
 
 
-def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> argparse.ArgumentParser:
-    """A :class:`Parser` with one ``--kebab-case`` option per field of dataclass ``cls``."""
-    parser = Parser(description=description, **kwargs)
+def _sections(cls: type) -> list[tuple[str | None, type, list[dataclasses.Field]]]:
+    """``(section name or None, dataclass, its option fields)``: the top level's plain options
+    first, then one entry per field whose type is a dataclass."""
     hints = typing.get_type_hints(cls)
+    plain = [f for f in dataclasses.fields(cls) if not dataclasses.is_dataclass(hints[f.name])]
+    out: list[tuple[str | None, type, list[dataclasses.Field]]] = [(None, cls, plain)] if plain else []
     for f in dataclasses.fields(cls):
-        flag = "--" + f.name.replace("_", "-")
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore
-        conv = _arg_type(hints[f.name])
-        choices = f.metadata.get("choices")
-        if conv is None:  # bool: --flag / --no-flag
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=_help(f))
-        else:
-            parser.add_argument(flag, type=conv, default=default, choices=choices, dest=f.name,
-                                help=_help(f))
+        sub = hints[f.name]
+        if dataclasses.is_dataclass(sub):
+            out.append((f.name, sub, list(dataclasses.fields(sub))))
+    return out
+
+
+def _default(f: dataclasses.Field) -> Any:
+    return f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore
+
+
+def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> argparse.ArgumentParser:
+    """A :class:`Parser` with one ``--kebab-case`` option per field of dataclass ``cls`` (and of
+    its sections, each an argument group titled by the section's docstring)."""
+    parser = Parser(description=description, **kwargs)
+    seen: set[str] = set()
+    for section, sub, flds in _sections(cls):
+        doc = (sub.__doc__ or "").strip().splitlines()[0] if section else ""
+        group = parser.add_argument_group(f"{section} ({doc.rstrip('.')})" if doc else section) if section else parser
+        hints = typing.get_type_hints(sub)
+        for f in flds:
+            if "help" not in f.metadata:
+                continue                          # a setting, not a command-line option
+            if f.name in seen:
+                raise TypeError(f"option --{f.name.replace('_', '-')} is defined twice in {cls.__name__}")
+            seen.add(f.name)
+            _add(group, f, hints[f.name])
     return parser
 
 
+def _add(group: Any, f: dataclasses.Field, hint: Any) -> None:
+    """One argparse argument for option field ``f``."""
+    conv, repeat = _arg_type(hint)
+    choices, default, required = f.metadata.get("choices"), _default(f), bool(f.metadata.get("required"))
+    if f.metadata.get("positional"):
+        group.add_argument(f.name, nargs=None if required else "?", type=conv, default=default, choices=choices,
+                           help=_help(f))
+    elif required:
+        group.add_argument("--" + f.name.replace("_", "-"), type=conv, required=True, choices=choices,
+                           dest=f.name, help=_help(f))
+    elif conv is None:  # bool: --flag, and --no-flag when it is on by default
+        group.add_argument("--" + f.name.replace("_", "-"), default=default, help=_help(f),
+                           action=argparse.BooleanOptionalAction if default else "store_true")
+    elif repeat:
+        group.add_argument("--" + f.name.replace("_", "-"), type=conv, action="append", default=None,
+                           dest=f.name, help=_help(f) + " (repeatable)")
+    else:
+        group.add_argument("--" + f.name.replace("_", "-"), type=conv, default=default, choices=choices,
+                           dest=f.name, help=_help(f))
+
+
+def from_options(cls: type, values: dict[str, Any]) -> Any:
+    """``cls`` (sections included) from a flat ``{option name: value}`` dict; options it does not
+    name keep their defaults, names ``cls`` does not know are ignored (settings saved by an older
+    version)."""
+    top: dict[str, Any] = {}
+    for section, sub, flds in _sections(cls):
+        mine = {f.name: values[f.name] for f in flds if f.name in values}
+        if section is None:
+            top.update(mine)
+        else:
+            top[section] = sub(**mine)
+    return cls(**top)
+
+
 def dataclass_from_args(cls: type, ns: argparse.Namespace) -> Any:
-    """Build ``cls`` from the parsed namespace (fields only)."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in vars(ns).items() if k in names})
+    """Build ``cls`` (sections included) from the parsed namespace."""
+    return from_options(cls, vars(ns))
+
+
+def options(obj: Any) -> dict[str, Any]:
+    """The flat ``{option name: value}`` dict of a dataclass instance with sections (the values
+    themselves, not copies)."""
+    out: dict[str, Any] = {}
+    for section, _, flds in _sections(type(obj)):
+        holder = obj if section is None else getattr(obj, section)
+        out.update({f.name: getattr(holder, f.name) for f in flds})
+    return out
+
+
+def replace_options(obj: Any, **values: Any) -> Any:
+    """A copy of ``obj`` with the named options (flat names) replaced; TypeError for an unknown one."""
+    unknown = set(values) - set(options(obj))
+    if unknown:
+        raise TypeError(f"unknown option(s): {', '.join(sorted(unknown))}")
+    return from_options(type(obj), {**options(obj), **values})
 
 
 def run_main(main: Callable[[], int | None]) -> None:

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from virl_quad.cli import Parser, UserError, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.policy_io import LoadedPolicy, load_policy
 
 
@@ -31,21 +32,28 @@ def zero_policy(obs: dict) -> np.ndarray:
     return np.zeros(12)
 
 
+@dataclass
+class EvaluateArgs:
+    """Options of ``python -m virl_quad.evaluate``."""
+
+    policy: str = opt("", "exported policy (.pt with its .json beside it)", required=True)
+    demo: str = opt("", "demonstration (empty: the one the policy learned from)")
+    episodes: int = opt(10, "episodes (seeded from --seed)")
+    seconds: float = opt(10.0, "s per episode")
+    seed: int = opt(0, "first episode seed")
+    no_randomize: bool = opt(False, "evaluate without domain randomisation")
+    json: str = opt("", "write the figures to this JSON file")
+    video: str = opt("", "write a side-by-side video of the first episode (.mp4)")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
     from virl_quad import demo as demo_lib
     from virl_quad.evaluation.rollout import evaluate
 
-    parser = Parser(prog="python -m virl_quad.evaluate", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--policy", required=True, help="exported policy (.pt with its .json beside it)")
-    parser.add_argument("--demo", default="", help="demonstration (empty: the one the policy learned from)")
-    parser.add_argument("--episodes", type=int, default=10, help="episodes (seeded from --seed)")
-    parser.add_argument("--seconds", type=float, default=10.0, help="s per episode")
-    parser.add_argument("--seed", type=int, default=0, help="first episode seed")
-    parser.add_argument("--no-randomize", action="store_true", help="evaluate without domain randomisation")
-    parser.add_argument("--json", default="", help="write the figures to this JSON file")
-    parser.add_argument("--video", default="", help="write a side-by-side video of the first episode (.mp4)")
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    parser = parser_from_dataclass(EvaluateArgs, description=__doc__.split("\n\n")[0],
+                                   prog="python -m virl_quad.evaluate")
+    args = dataclass_from_args(EvaluateArgs, parser.parse_args(sys.argv[1:] if argv is None else argv))
     if args.episodes < 1 or args.seconds <= 0:
         raise UserError("--episodes must be >= 1 and --seconds > 0")
     policy = load_policy(args.policy)

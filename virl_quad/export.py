@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -17,11 +18,11 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from virl_quad import robots
-from virl_quad.cli import Parser, UserError, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy_io import metadata_for, save_policy
 from virl_quad.training import checkpoint
-from virl_quad.training.config import TrainArgs, hidden_sizes, rsl_rl_config
+from virl_quad.training.config import TrainArgs, from_dict, hidden_sizes, rsl_rl_config
 
 
 def _actor(contract: PolicyContract, args: TrainArgs) -> MLPModel:
@@ -34,9 +35,8 @@ def _actor(contract: PolicyContract, args: TrainArgs) -> MLPModel:
 
 def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs, PolicyContract]:
     """Rebuild the rsl-rl actor of a checkpoint (eval mode), with the run's options and policy contract."""
-    names = set(TrainArgs.__dataclass_fields__)
-    args = TrainArgs(**{k: v for k, v in data["config"].items() if k in names})
-    contract = checkpoint.contract_of(data, args.robot)
+    args = from_dict(data["config"])
+    contract = checkpoint.contract_of(data, args.run.robot)
     hidden_sizes(args)
     actor = _actor(contract, args)
     try:
@@ -51,13 +51,13 @@ def default_contract(robot: str, demo_frames: int | None = None, tg=None) -> Pol
     frames (None: none): the env's defaults, for untrained policies in tests and dry runs."""
     from virl_quad.envs import EnvConfig, policy_contract
 
-    return policy_contract(robots.get(robot), EnvConfig(tg=tg), demo_frames)
+    return policy_contract(robots.get(robot), EnvConfig.make(tg=tg), demo_frames)
 
 
 def fresh_actor(contract: PolicyContract, hidden: list[int] | tuple[int, ...] = (256, 128), seed: int = 0) -> MLPModel:
     """An untrained actor with the training architecture for ``contract`` (for tests and dry runs)."""
     torch.manual_seed(seed)
-    return _actor(contract, TrainArgs(hidden=",".join(str(h) for h in hidden))).eval()
+    return _actor(contract, TrainArgs.make(hidden=",".join(str(h) for h in hidden))).eval()
 
 
 def export_actor(actor: MLPModel, robot: str, out: str | Path, contract: PolicyContract, demo: dict | None = None,
@@ -84,16 +84,16 @@ def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
     actor, args, contract = actor_from_checkpoint(data)
     report = run_dir / "report.json"
     scores = json.loads(report.read_text()).get("evaluation", {}) if report.exists() else {}
-    demo_meta = {"source": args.demo}
+    demo_meta = {"source": args.run.demo}
     demo_file = run_dir / "demo.npz"
     if demo_file.exists():
         from virl_quad.demo.render import load_npz
 
         d = load_npz(demo_file)
-        demo_meta.update({"source": d.source or args.demo, "robot": d.robot, "fps": d.fps,
+        demo_meta.update({"source": d.source or args.run.demo, "robot": d.robot, "fps": d.fps,
                           "num_frames": d.num_frames, "has_motion": d.motion is not None})
-    extra = {"reward": args.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])}
-    return export_actor(actor, args.robot, out, contract, demo_meta, scores, extra, onnx)
+    extra = {"reward": args.run.reward, "iterations": int(data["iteration"]), "env_steps": int(data["env_steps"])}
+    return export_actor(actor, args.run.robot, out, contract, demo_meta, scores, extra, onnx)
 
 
 def _export_onnx(actor: MLPModel, path: Path) -> None:
@@ -106,13 +106,19 @@ def _export_onnx(actor: MLPModel, path: Path) -> None:
                         "install the extra: pip install -e '.[onnx]'") from None
 
 
+@dataclass
+class ExportArgs:
+    """Options of ``python -m virl_quad.export``."""
+
+    run_dir: str = opt("", "training run folder (holds checkpoint.pt)", positional=True, required=True)
+    out: str = opt("", "output policy path, e.g. policies/pupper_trot.pt", required=True)
+    onnx: bool = opt(False, "also write NAME.onnx")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
-    parser = Parser(prog="python -m virl_quad.export", description=__doc__.split("\n\n")[0])
-    parser.add_argument("run_dir", help="training run folder (holds checkpoint.pt)")
-    parser.add_argument("--out", required=True, help="output policy path, e.g. policies/pupper_trot.pt")
-    parser.add_argument("--onnx", action="store_true", help="also write NAME.onnx")
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    parser = parser_from_dataclass(ExportArgs, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.export")
+    args = dataclass_from_args(ExportArgs, parser.parse_args(sys.argv[1:] if argv is None else argv))
     path = export(args.run_dir, args.out, args.onnx)
     print(f"exported {path} and {path.with_suffix('.json')}")
     return 0

@@ -13,7 +13,6 @@ Export the result with ``python -m virl_quad.export RUN_DIR --out policies/NAME.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import signal
@@ -24,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from virl_quad.cli import UserError, dataclass_from_args, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, dataclass_from_args, options, parser_from_dataclass, replace_options, run_main
 from virl_quad.training import checkpoint
-from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, rsl_rl_config, to_dict, validate
+from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, from_dict, rsl_rl_config, to_dict, validate
 
 
 def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
@@ -34,9 +33,9 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
     probe = argparse.ArgumentParser(add_help=False)
     for action in parser._actions:
         if action.option_strings and action.dest != "help":
-            probe.add_argument(*action.option_strings, dest=action.dest, default=argparse.SUPPRESS,
-                               **({"action": action.__class__} if isinstance(action, argparse.BooleanOptionalAction)
-                                  else {"nargs": action.nargs}))
+            kind = ({"action": action.__class__} if isinstance(action, argparse.BooleanOptionalAction)
+                    else {"action": "store_true"} if action.nargs == 0 else {"nargs": action.nargs})
+            probe.add_argument(*action.option_strings, dest=action.dest, default=argparse.SUPPRESS, **kind)
     return set(vars(probe.parse_known_args(argv)[0]))
 
 
@@ -47,18 +46,18 @@ LEGACY: dict[str, object] = {"tg": False}
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
     """Apply --resume (saved config + explicitly typed options) and pick the run folder."""
-    if args.resume:
-        run_dir = Path(args.resume)
+    if args.run.resume:
+        run_dir = Path(args.run.resume)
         if not run_dir.is_dir():
             raise UserError(f"resume folder {run_dir} does not exist")
         data = checkpoint.load(run_dir)
         checkpoint.contract_of(data, data["config"]["robot"])   # ValueError when it cannot continue
-        names = {f.name for f in dataclasses.fields(TrainArgs)}
-        saved = TrainArgs(**{**LEGACY, **{k: v for k, v in data["config"].items() if k in names}})
-        args = dataclasses.replace(saved, **{k: getattr(args, k) for k in explicit if k not in ("resume", "run_dir")},
-                                   resume=str(run_dir), run_dir=str(run_dir))
+        saved = from_dict({**LEGACY, **data["config"]})
+        typed = options(args)
+        args = replace_options(saved, **{k: typed[k] for k in explicit if k not in ("resume", "run_dir")},
+                               resume=str(run_dir), run_dir=str(run_dir))
         return args, run_dir, data
-    run_dir = Path(args.run_dir or f"runs/{args.robot}-{args.reward}-{time.strftime('%Y%m%d-%H%M%S')}")
+    run_dir = Path(args.run.run_dir or f"runs/{args.run.robot}-{args.run.reward}-{time.strftime('%Y%m%d-%H%M%S')}")
     if (run_dir / checkpoint.LATEST).exists():
         raise UserError(f"{run_dir} already holds a run: use --resume {run_dir} or another --run-dir")
     return args, run_dir, None
@@ -69,11 +68,11 @@ def _load_demo(args: TrainArgs, run_dir: Path):
 
     saved = run_dir / "demo.npz"
     if saved.exists():
-        d = demo_lib.load(str(saved), args.robot)
-        if args.reward not in FRAMELESS_REWARDS:
+        d = demo_lib.load(str(saved), args.run.robot)
+        if args.run.reward not in FRAMELESS_REWARDS:
             _check_same_rendering(d, args)
         return d
-    d = demo_lib.load(args.demo, args.robot, ground=args.ground)
+    d = demo_lib.load(args.run.demo, args.run.robot, ground=args.env.ground)
     run_dir.mkdir(parents=True, exist_ok=True)
     from virl_quad.demo.render import save_npz
 
@@ -90,11 +89,11 @@ def _check_same_rendering(saved, args: TrainArgs) -> None:
     if saved.motion is None:
         return                                   # an imported video: nothing rendered to compare
     try:
-        now = demo_lib.load(args.demo, args.robot, ground=args.ground)
+        now = demo_lib.load(args.run.demo, args.run.robot, ground=args.env.ground)
     except (ValueError, FileNotFoundError, OSError):
         return                                   # the source is not here: trust the saved frames
     if now.frames.shape != saved.frames.shape or np.abs(now.frames.astype(np.int16) - saved.frames).mean() > 1.0:
-        raise UserError(f"the run's demonstration frames differ from what this version renders for {args.demo!r} "
+        raise UserError(f"the run's demonstration frames differ from what this version renders for {args.run.demo!r} "
                         f"(the renderer changed, e.g. its ground): train a new run")
 
 
@@ -107,15 +106,15 @@ def _other_clips(args: TrainArgs, run_dir: Path) -> list[np.ndarray]:
     from virl_quad import demo as demo_lib
     from virl_quad.motion.gaits import GAIT_NAMES
 
-    choice = args.other_demos.strip()
-    gait = args.demo.removeprefix("gait:")
+    choice = args.distance.other_demos.strip()
+    gait = args.run.demo.removeprefix("gait:")
     if choice == "auto":
         sources = [f"gait:{g}" for g in GAIT_NAMES if g != gait] if gait in GAIT_NAMES else []
     elif choice in ("", "none"):
         sources = []
     else:
         sources = [s.strip() for s in choice.split(",") if s.strip()]
-    clips = [demo_lib.load(s, args.robot, ground=args.ground).frames for s in sources]
+    clips = [demo_lib.load(s, args.run.robot, ground=args.env.ground).frames for s in sources]
     run_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(saved, **{f"clip{i:02d}": c for i, c in enumerate(clips)})
     if sources:
@@ -128,19 +127,19 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Pa
     contract), else the robot's defaults with ``--tg``'s trajectory generator (``--prior-from``:
     fitted to the demonstration video, or to its reference motion)."""
     if resume_data is not None:
-        return checkpoint.contract_of(resume_data, args.robot).env_overrides()
-    if not args.tg:
+        return checkpoint.contract_of(resume_data, args.run.robot).env_overrides()
+    if not args.prior.tg:
         return {}
     from virl_quad import robots
 
-    spec = robots.get(args.robot)
+    spec = robots.get(args.run.robot)
     try:
-        if args.prior_from == "video":
+        if args.prior.prior_from == "video":
             tg, report = _prior_from_video(demo, spec, run_dir)
         else:
             from virl_quad.training.prior import tg_for_demo
 
-            tg, report = tg_for_demo(demo, spec, args.demo)
+            tg, report = tg_for_demo(demo, spec, args.run.demo)
     except ValueError as e:
         raise UserError(str(e)) from None
     print(f"trajectory generator: {report}", flush=True)
@@ -164,41 +163,42 @@ def _prior_from_video(demo, spec, run_dir: Path):
 
 def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     """Demonstration, VecEnv, reward source, evaluator and runner for these options."""
+    from virl_quad import robots
     from virl_quad.envs.vec_env import QuadrupedVecEnv
     from virl_quad.training.rewards import EnvReward, LearnedReward, SurvivalReward
     from virl_quad.training.runner import VirlRunner
 
     demo = _load_demo(args, run_dir)
-    oracle = args.reward == "oracle"
+    oracle = args.run.reward == "oracle"
     if oracle and demo.motion is None:
         raise UserError("--reward oracle needs a demonstration with a reference motion (a gait or motion file)")
     it0 = int(resume_data["iteration"]) if resume_data else 0
-    workers = (os.cpu_count() or 1) if args.num_workers < 0 else args.num_workers
+    workers = (os.cpu_count() or 1) if args.env.num_workers < 0 else args.env.num_workers
     action_options = _action_options(args, demo, resume_data, run_dir)
-    env = QuadrupedVecEnv(args.robot, args.num_envs, num_workers=min(workers, args.num_envs),
-                          workers_kind=args.workers, ray_address=args.ray_address or None,
+    env = QuadrupedVecEnv(robots.get(args.run.robot), args.env.num_envs, num_workers=min(workers, args.env.num_envs),
+                          workers_kind=args.env.workers, ray_address=args.env.ray_address or None,
                           actor_prefix=f"{run_dir.name}-{os.getpid()}-",
-                          seed=args.seed + 7919 * it0, device=args.device, demo=demo,
-                          randomize=args.randomize, episode_seconds=args.episode_seconds,
-                          oracle_reward=oracle, ground=args.ground,
-                          render=args.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
+                          seed=args.run.seed + 7919 * it0, device=args.run.device, demo=demo,
+                          randomize=args.env.randomize, episode_seconds=args.env.episode_seconds,
+                          oracle_reward=oracle, ground=args.env.ground,
+                          render=args.run.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
                           **action_options)
     if oracle:
         source = EnvReward()
-    elif args.reward == "prior":
+    elif args.run.reward == "prior":
         source = SurvivalReward()
     else:
-        source = LearnedReward(args.reward, demo.frames, args.num_envs, args.reward_updates, args.seed,
-                               args.device, lr=args.reward_lr, cyclic=demo.loop, w_d=args.reward_wd,
+        source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, args.distance.reward_updates, args.run.seed,
+                               args.run.device, lr=args.distance.reward_lr, cyclic=demo.loop, w_d=args.distance.reward_wd,
                                other_clips=_other_clips(args, run_dir),
-                               adversarial_weight=args.adversarial_weight, w_gp=args.reward_gp)
+                               adversarial_weight=args.distance.adversarial_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
                         evaluate=(lambda policy: _evaluate(args, demo, policy, actions))
                         if demo.motion is not None else None,   # a video alone: no ground truth to score
-                        device=args.device)
-    if not args.device.startswith("cuda"):
+                        device=args.run.device)
+    if not args.run.device.startswith("cuda"):
         runner.alg.learn_threads = os.cpu_count() or 1   # every core while the env workers wait
     return demo, env, runner
 
@@ -211,18 +211,22 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     if int(os.environ.get("WORLD_SIZE", "1")) > 1:
         raise UserError("multi-GPU training (torchrun, WORLD_SIZE > 1) is not supported: each rank would learn "
                         "its own distance model; run one process per GPU (docs/cluster.md)")
-    if args.device.startswith("cuda") and not torch.cuda.is_available():
+    if args.env.workers == "ray":
+        from virl_quad.envs.ray_workers import check_address
+
+        check_address(args.env.ray_address)           # at once, not after the prior fit
+    if args.run.device.startswith("cuda") and not torch.cuda.is_available():
         raise UserError("--device cuda asked for, but torch sees no CUDA device")
-    torch.manual_seed(args.seed)
-    np.random.seed(args.seed)
-    if not args.device.startswith("cuda"):
+    torch.manual_seed(args.run.seed)
+    np.random.seed(args.run.seed)
+    if not args.run.device.startswith("cuda"):
         # One thread: the env workers own the other cores, and an oversubscribed torch is 10x slower.
         torch.set_num_threads(1)
     demo, env, runner = build(args, run_dir, data)
     from virl_quad.envs.workers import EnvWorkerLost   # loaded by build with the envs
 
     log = RunLog(run_dir / "train.log")
-    log(f"virl_quad.train: robot={args.robot} demo={args.demo} reward={args.reward} envs={args.num_envs} "
+    log(f"virl_quad.train: robot={args.run.robot} demo={args.run.demo} reward={args.run.reward} envs={args.env.num_envs} "
         f"run_dir={run_dir}")
     (run_dir / "config.json").write_text(json.dumps(to_dict(args), indent=2) + "\n")
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` checkpoints like Ctrl-C
@@ -230,9 +234,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         if data is not None:
             runner.restore(data)
             log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps); "
-                f"--iterations {args.iterations} is the total, so at most "
-                f"{max(args.iterations - runner.current_learning_iteration, 0)} more")
-        log(f"demonstration: {demo.source or args.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
+                f"--iterations {args.run.iterations} is the total, so at most "
+                f"{max(args.run.iterations - runner.current_learning_iteration, 0)} more")
+        log(f"demonstration: {demo.source or args.run.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
         if not runner.standing and demo.motion is not None:
             from virl_quad.evaluate import zero_policy
@@ -243,8 +247,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         _attach_alignment_probe(args, demo, runner, log)
         if data is None:
             _warm_start(args, demo, runner, log)
-        left = max(args.minutes - (time.time() - t_start) / 60.0, 1e-6) if args.minutes else 0.0   # min
-        runner.train(args.iterations, left, args.save_every, args.eval_every, log=log)
+        left = max(args.run.minutes - (time.time() - t_start) / 60.0, 1e-6) if args.run.minutes else 0.0   # min
+        runner.train(args.run.iterations, left, args.run.save_every, args.eval.eval_every, log=log)
     except EnvWorkerLost as e:
         raise UserError(f"{e}; checkpoint written at iteration {runner.current_learning_iteration}: continue "
                         f"with --resume {run_dir}") from None
@@ -258,13 +262,13 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
     """With a learned reward and a reference motion: record the alignment probe's graded
     rollouts and measure the untrained reward on them (``--alignment-probe``)."""
     model = getattr(runner.reward_source, "model", None)
-    if not args.alignment_probe or model is None or demo.motion is None:
+    if not args.eval.alignment_probe or model is None or demo.motion is None:
         return
     from virl_quad.training.alignment import AlignmentProbe
 
     t0 = time.time()
-    gait = Path(str(args.demo)).stem.removeprefix("gait:")
-    runner.alignment_probe = AlignmentProbe(args.robot, demo, gait, randomize=args.randomize, ground=args.ground)
+    gait = Path(str(args.run.demo)).stem.removeprefix("gait:")
+    runner.alignment_probe = AlignmentProbe(args.run.robot, demo, gait, randomize=args.env.randomize, ground=args.env.ground)
     first = runner.alignment_probe.probe(model)
     log(f"alignment probe: {len(runner.alignment_probe.rollouts)} graded rollouts ({time.time() - t0:.0f} s); "
         f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}")
@@ -283,10 +287,10 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
         prior = _evaluate(args, demo, lambda obs: np.zeros(14), runner.env.contract.env_overrides())
         log(f"the gait prior alone (zero residual, no modulation): "
             f"{eval_summary(prior, runner.standing).rsplit(' @', 1)[0]}")
-    if tg is not None and args.warm_start_rounds > 0:
+    if tg is not None and args.prior.warm_start_rounds > 0:
         t0 = time.time()
-        student = distill_into(runner.alg.actor, robots.get(args.robot), demo, tg, args.hidden, args.seed,
-                               args.warm_start_rounds, args.warm_start_steps, args.randomize, log)
+        student = distill_into(runner.alg.actor, robots.get(args.run.robot), demo, tg, args.ppo.hidden, args.run.seed,
+                               args.prior.warm_start_rounds, args.prior.warm_start_steps, args.env.randomize, log)
         runner.wall_time += time.time() - t0
         runner.alg.fix_actor_normalizer()
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
@@ -296,9 +300,9 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
 
             runner.run_evaluation()
             log(f"warm-started policy: {eval_summary(runner.last_eval, runner.standing)}")
-    if args.critic_warmup > 0:
-        runner.alg.freeze_actor(args.critic_warmup)
-        log(f"the first {args.critic_warmup} iterations fit the critic alone (actor frozen)")
+    if args.ppo.critic_warmup > 0:
+        runner.alg.freeze_actor(args.ppo.critic_warmup)
+        log(f"the first {args.ppo.critic_warmup} iterations fit the critic alone (actor frozen)")
 
 
 class RunLog:
@@ -320,8 +324,8 @@ def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dic
     default pose)."""
     from virl_quad.evaluation.rollout import evaluate
 
-    return evaluate(policy, args.robot, demo, episodes=args.eval_episodes, seed=100_000,
-                    episode_seconds=args.eval_seconds, randomize=args.randomize, ground=args.ground,
+    return evaluate(policy, args.run.robot, demo, episodes=args.eval.eval_episodes, seed=100_000,
+                    episode_seconds=args.eval.eval_seconds, randomize=args.env.randomize, ground=args.env.ground,
                     **(actions or {}))
 
 
@@ -368,8 +372,8 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
 
     log(f"policy: {export(run_dir, run_dir / 'policy.pt')} (TorchScript with its contract; serve it with "
         f"python -m virl_quad.deploy.serve --policy {run_dir / 'policy.pt'})")
-    if args.video:
-        out = side_by_side_video(policy, args.robot, demo, run_dir / "side_by_side.mp4", ground=args.ground, **actions)
+    if args.run.video:
+        out = side_by_side_video(policy, args.run.robot, demo, run_dir / "side_by_side.mp4", ground=args.env.ground, **actions)
         log(f"video: {out}")
 
 

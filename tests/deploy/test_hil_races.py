@@ -150,6 +150,8 @@ def test_every_arm_and_estop_sample_is_counted_in_a_burst(rig_factory):
         rig.put("estop", b"junk" * (i % 7))
     rig.put("estop", rig.estop_msg("the real one"))
     st = rig.wait(lambda s: _events(s, "estop_received") == 301, "301 E-stop samples counted")
+    assert st["mode"] == "DAMPING" or st["estop_pending"], st    # counted: applied, or at the next tick
+    st = rig.wait(lambda s: s["mode"] == "DAMPING", "DAMPING at the tick after the E-stop")
     other = st["rejected_other"]
     assert sum(v for k, v in other.items() if k.startswith("estop:")) == 300, st
     assert sum(v for k, v in other.items() if k.startswith("arm:")) == 140 + 300, st

@@ -100,3 +100,20 @@ def test_a_trajectory_generator_takes_14_actions() -> None:
             env.step(torch.zeros(2, 12))
     finally:
         env.close()
+
+
+def test_the_robot_spec_object_reaches_the_workers() -> None:
+    """A RobotSpec is passed whole, not looked up again by name: a spec the registry does not
+    know (another name, a shorter episode) builds and steps in a worker process."""
+    import dataclasses
+
+    from virl_quad import robots
+
+    spec = dataclasses.replace(robots.get("pupper"), name="pupper-variant", episode_seconds=0.5)
+    env = QuadrupedVecEnv(spec, 2, num_workers=1, render=False)
+    try:
+        assert env.max_episode_length == 25 and env.cfg["robot"] == "pupper-variant"
+        obs, _, _, _ = env.step(torch.zeros(2, env.num_actions))
+        assert torch.isfinite(obs["policy"]).all()
+    finally:
+        env.close()

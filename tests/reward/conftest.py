@@ -47,7 +47,7 @@ def other() -> np.ndarray:
 @pytest.fixture
 def small_cfg() -> RewardConfig:
     """Paper architecture, smaller batches and windows so a test update takes milliseconds."""
-    return RewardConfig(batch_pairs=8, window_min=4, window_max=10, same_source_max_offset=2, ae_frames=32,
+    return RewardConfig.make(batch_pairs=8, window_min=4, window_max=10, same_source_max_offset=2, ae_frames=32,
                         paint_background=False)   # synthetic blobs, not renders: frames as they are
 
 

@@ -85,7 +85,7 @@ def test_open_episodes_train_the_model_before_any_episode_ends(small_cfg, demo, 
     agent, expert = agent_episode(0, T=24)
     rollout = np.stack([agent, agent[::-1]], axis=1), np.stack([expert, expert], axis=1)
     for variant in ("virl", "gaifo"):
-        rm = build_reward(RewardConfig(**{**small_cfg.to_dict(), "variant": variant}), demo, seed=0)
+        rm = build_reward(RewardConfig.make(**{**small_cfg.to_dict(), "variant": variant}), demo, seed=0)
         rm.add_rollout(*rollout, np.zeros((24, 2), bool))
         assert len(rm.dataset) == 0 and len(rm.dataset.sequences()) == 2
         assert rm.update(2)["total"] > 0

@@ -71,7 +71,7 @@ def test_raes_compares_with_reversed_frames():
     ("virl", {"sns", "sni", "raes", "vaei"}), ("sequence", {"sns", "sni", "raes", "vaei"}),
     ("no_ae", {"sns", "sni"}), ("frame", {"sni", "vaei"})])
 def test_total_loss_parts_per_variant(variant, parts):
-    cfg = RewardConfig(variant=variant)
+    cfg = RewardConfig.make(variant=variant)
     torch.manual_seed(0)
     model = DistanceModel(cfg).train()
     a, b = torch.rand(4, 6, 48, 48), torch.rand(4, 6, 48, 48)
@@ -79,8 +79,8 @@ def test_total_loss_parts_per_variant(variant, parts):
     loss, logs = total_loss(model, a, b, y)
     assert set(logs) == parts | {"total"}
     assert all(logs[k] > 0 for k in parts)                       # random pairs: every term is positive
-    w = {"sns": cfg.w_sns, "sni": cfg.w_sni if variant != "frame" else cfg.w_sns + cfg.w_sni,
-         "raes": cfg.w_raes, "vaei": cfg.w_vaei}
+    w = {"sns": cfg.loss.w_sns, "sni": cfg.loss.w_sni if variant != "frame" else cfg.loss.w_sns + cfg.loss.w_sni,
+         "raes": cfg.loss.w_raes, "vaei": cfg.loss.w_vaei}
     assert loss.item() == pytest.approx(sum(w[k] * logs[k] for k in parts), rel=1e-5)
     loss.backward()
     unused = {"phi.logvar.weight", "phi.logvar.bias"} if variant == "no_ae" else set()
@@ -89,7 +89,7 @@ def test_total_loss_parts_per_variant(variant, parts):
 
 def test_vaei_subset_is_unbiased_in_expectation():
     torch.manual_seed(0)
-    model = DistanceModel(RewardConfig(dropout=0.0)).eval()
+    model = DistanceModel(RewardConfig.make(dropout=0.0)).eval()
     frames = torch.rand(4, 8, 48, 48)
     mu, lv = model.encode_frames(frames)
     lv = torch.full_like(lv, -30.0)                 # no sampling noise: compare subset vs full mean
@@ -101,7 +101,7 @@ def test_vaei_subset_is_unbiased_in_expectation():
 
 def test_overfit_one_fixed_batch(demo, other, agent_episode):
     """Training on one fixed real batch drives the total loss down at least 10x."""
-    cfg = RewardConfig(batch_pairs=8, window_min=8, window_max=8, ae_frames=0, dropout=0.0,
+    cfg = RewardConfig.make(batch_pairs=8, window_min=8, window_max=8, ae_frames=0, dropout=0.0,
                        paint_background=False)       # synthetic clips: the blobs on their dark ground as they are
     rm = build_reward(cfg, demo, [other], seed=0)
     for s in range(3):

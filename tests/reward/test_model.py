@@ -24,8 +24,8 @@ def test_shapes_and_ranges():
     assert h.shape == (3, 2, 64)
     rec = model.psi(mu)
     assert rec.shape == (3, 2, 48, 48) and (rec >= 0).all() and (rec <= 1).all()
-    assert DistanceModel(RewardConfig(variant="frame")).omega is None
-    assert DistanceModel(RewardConfig(variant="no_ae")).psi is None
+    assert DistanceModel(RewardConfig.make(variant="frame")).omega is None
+    assert DistanceModel(RewardConfig.make(variant="no_ae")).psi is None
 
 
 def test_transposed_conv_matches_torch():
@@ -40,7 +40,7 @@ def test_transposed_conv_matches_torch():
 def test_sequence_decoder_outputs_last_frame_first():
     """Train only L_RAES on sequences of distinct frames: decoded step k must match frame T-1-k."""
     torch.manual_seed(0)
-    cfg = RewardConfig(dropout=0.0)
+    cfg = RewardConfig.make(dropout=0.0)
     model = DistanceModel(cfg).train()
     T = 4
     yy = torch.arange(48.0)[:, None].expand(48, 48)

@@ -94,9 +94,9 @@ def test_sampler_batches_half_positive_and_every_kind(small_cfg, demo, other, ag
     nbytes = rm.dataset.nbytes
     for _ in range(40):
         batch = rm.sampler.draw(rng)
-        B = small_cfg.batch_pairs
+        B = small_cfg.pairs.batch_pairs
         assert batch.a.shape == batch.b.shape and batch.a.shape[1] == B and batch.a.shape[2:] == (48, 48)
-        assert small_cfg.window_min <= batch.a.shape[0] <= small_cfg.window_max
+        assert small_cfg.pairs.window_min <= batch.a.shape[0] <= small_cfg.pairs.window_max
         assert batch.y.tolist() == [1.0] * (B // 2) + [0.0] * (B // 2)
         assert batch.a.dtype == np.float32 and 0 <= batch.a.min() and batch.a.max() <= 1
         for k, lab in zip(batch.kinds, batch.y):
@@ -112,8 +112,8 @@ def test_other_clip_only_with_clips_and_weights(small_cfg, demo):
     rm = build_reward(small_cfg, demo, None, seed=0)
     pos, neg = rm.sampler.available(8, have_agent=False)
     assert "other_clip" not in neg and "expert_vs_agent" not in neg
-    cfg = RewardConfig(**{**small_cfg.to_dict(), "pair_weights": {"reversed": 0.0}})
+    cfg = RewardConfig.make(**{**small_cfg.to_dict(), "pair_weights": {"reversed": 0.0}})
     rm = build_reward(cfg, demo, None, seed=0)
     assert "reversed" not in rm.sampler.available(8, have_agent=True)[1]
     with pytest.raises(ValueError, match="pair_weights"):
-        RewardConfig(pair_weights={"nope": 1.0}).validate()
+        RewardConfig.make(pair_weights={"nope": 1.0}).validate()

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from virl_quad.cli import replace_options
 from virl_quad.reward import VARIANTS, RewardConfig, build_reward, load_reward
 
 
@@ -18,7 +19,7 @@ def rollout(seed: int, T: int = 7, N: int = 5):
 
 
 def make(variant, small_cfg, demo, other, agent_episode, seed=3, updates=2):
-    cfg = RewardConfig(**{**small_cfg.to_dict(), "variant": variant})
+    cfg = RewardConfig.make(**{**small_cfg.to_dict(), "variant": variant})
     rm = build_reward(cfg, demo, [other], seed=seed)
     for s in range(3):
         rm.add_episode(*agent_episode(s))
@@ -75,9 +76,9 @@ def test_rewards_in_unit_interval_even_far_apart(trained_rm):
     assert ((r > 0) & (r <= 1)).all()
     same, _ = trained_rm.stream_step(black, black, trained_rm.stream_state(3))
     assert torch.allclose(same, torch.ones(3))                    # identical videos: d = 0, r = 1
-    tiny = build_reward(RewardConfig(w_d=-1e6), trained_rm.demo, seed=0)
+    tiny = build_reward(RewardConfig.make(w_d=-1e6), trained_rm.demo, seed=0)
     r, _ = tiny.stream_step(black, white, tiny.stream_state(3))
-    assert (r == tiny.cfg.reward_floor).all()                    # underflow is floored, never 0
+    assert (r == tiny.cfg.reward.reward_floor).all()                    # underflow is floored, never 0
 
 
 def test_rewards_use_eval_mode(trained_rm):
@@ -118,19 +119,19 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
         loaded.add_episode(*agent_episode(s_))
     assert rm.update(2) == loaded.update(2)
     assert torch.equal(rm.recompute(agent, expert, dones, s), loaded.recompute(agent, expert, dones, s))
-    other_rm = make(variant, RewardConfig(**{**small_cfg.to_dict(), "lr": 5e-4}), demo, other, agent_episode)
+    other_rm = make(variant, RewardConfig.make(**{**small_cfg.to_dict(), "lr": 5e-4}), demo, other, agent_episode)
     with pytest.raises(ValueError, match="different RewardConfig"):
         other_rm.load_state_dict(torch.load(path, weights_only=True))
     # the pair-sampling weights may change on resume (--adversarial-weight): same network, same rewards
-    reweighted = make(variant, RewardConfig(**{**small_cfg.to_dict(), "pair_weights": {"expert_vs_agent": 0.0}}),
+    reweighted = make(variant, RewardConfig.make(**{**small_cfg.to_dict(), "pair_weights": {"expert_vs_agent": 0.0}}),
                       demo, other, agent_episode)
     reweighted.load_state_dict(torch.load(path, weights_only=True))
     fresh = load_reward(path)                                # the saved state, not updated since
     assert torch.equal(fresh.recompute(agent, expert, dones, s), reweighted.recompute(agent, expert, dones, s))
-    assert reweighted.cfg.pair_weights == {"expert_vs_agent": 0.0}
+    assert reweighted.cfg.pairs.pair_weights == {"expert_vs_agent": 0.0}
     # so may w_d: the same distances, another reward shape (exp(-1 d^2) = exp(-5 d^2) ** 0.2)
     if variant != "gaifo":
-        softer = make(variant, RewardConfig(**{**small_cfg.to_dict(), "w_d": small_cfg.w_d / 5}), demo, other,
+        softer = make(variant, RewardConfig.make(**{**small_cfg.to_dict(), "w_d": small_cfg.reward.w_d / 5}), demo, other,
                       agent_episode)
         softer.load_state_dict(torch.load(path, weights_only=True))
         torch.testing.assert_close(softer.recompute(agent, expert, dones, s),
@@ -165,7 +166,7 @@ def test_bad_inputs_raise_one_line_value_errors(trained_rm):
     with pytest.raises(ValueError, match="empty"):
         rm.add_episode(np.zeros((0, 48, 48), np.uint8), np.zeros((0, 48, 48), np.uint8))
     with pytest.raises(ValueError, match="variant"):
-        build_reward(RewardConfig(variant="tcn"), rm.demo)
+        build_reward(RewardConfig.make(variant="tcn"), rm.demo)
     with pytest.raises(ValueError, match="demo_frames"):
         build_reward(RewardConfig(), np.zeros((10, 64, 64), np.uint8))
     r, _ = rm.stream_step(torch.zeros(2, 48, 48), torch.zeros(2, 48, 48, dtype=torch.uint8), s)
@@ -185,24 +186,22 @@ def test_gaifo_reward_is_discriminator_output(small_cfg, demo, other, agent_epis
         d1 = torch.sigmoid(rm.reward_net(x0, x1))
     assert torch.allclose(r0, d0, atol=1e-6) and torch.allclose(r1, d1, atol=1e-6)
     with pytest.raises(ValueError, match="gaifo needs"):
-        build_reward(RewardConfig(variant="gaifo"), demo).update(1)
+        build_reward(RewardConfig.make(variant="gaifo"), demo).update(1)
 
 
 def test_rewards_come_from_a_slowly_moving_copy(small_cfg, demo, other, agent_episode):
     """With ema, the reward network trails the trained one by ema ** updates; without, it is the trained one."""
-    import dataclasses
-
-    rm = make("virl", dataclasses.replace(small_cfg, ema=0.9), demo, other, agent_episode, updates=0)
+    rm = make("virl", replace_options(small_cfg, ema=0.9), demo, other, agent_episode, updates=0)
     before = [p.detach().clone() for p in rm.reward_net.parameters()]
     rm.update(3)
     keep = 0.9 ** 3
     for slow, fast, old in zip(rm.reward_net.parameters(), rm.net.parameters(), before):
         assert torch.allclose(slow, keep * old + (1 - keep) * fast, atol=1e-6)
     assert any(not torch.equal(s, f) for s, f in zip(rm.reward_net.parameters(), rm.net.parameters()))
-    plain = make("virl", dataclasses.replace(small_cfg, ema=0.0), demo, other, agent_episode, updates=1)
+    plain = make("virl", replace_options(small_cfg, ema=0.0), demo, other, agent_episode, updates=1)
     assert plain.reward_net is plain.net
     with pytest.raises(ValueError, match="ema"):
-        RewardConfig(ema=1.0).validate()
+        RewardConfig.make(ema=1.0).validate()
 
 
 def test_where_the_robot_stands_on_the_ground_does_not_change_the_distance():
@@ -218,7 +217,7 @@ def test_where_the_robot_stands_on_the_ground_does_not_change_the_distance():
     shifted = render_demonstration(moved, "pupper", ground="checker").frames
     assert (shifted != d.frames).mean() > 0.05                    # the ground moved under the robot
     for paint in (True, False):
-        rm = build_reward(RewardConfig(paint_background=paint, ema=0.0), d.frames, seed=0)
+        rm = build_reward(RewardConfig.make(paint_background=paint, ema=0.0), d.frames, seed=0)
         rm.update(2)
         dist = rm.distance(torch.from_numpy(d.frames[:40, None]), torch.from_numpy(shifted[:40, None]))
         assert (float(dist.max()) < 1e-6) == paint, float(dist.max())

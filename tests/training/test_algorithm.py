@@ -23,7 +23,7 @@ class _Env:
 
 
 def _ppo() -> VirlPPO:
-    cfg = rsl_rl_config(TrainArgs(hidden="8"))
+    cfg = rsl_rl_config(TrainArgs.make(hidden="8"))
     cfg["algorithm"]["class_name"] = VirlPPO
     cfg["multi_gpu"] = None
     env = _Env()

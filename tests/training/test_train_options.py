@@ -13,27 +13,27 @@ from virl_quad.training.rewards import LearnedReward
 
 
 def test_auto_uses_the_other_builtin_gaits_and_is_saved(tmp_path: Path) -> None:
-    clips = _other_clips(TrainArgs(demo="trot"), tmp_path)
+    clips = _other_clips(TrainArgs.make(demo="trot"), tmp_path)
     assert len(clips) == 4 and all(c.ndim == 3 and c.shape[1:] == (48, 48) for c in clips)
     # a resume reads the saved clips, whatever the option now says
-    again = _other_clips(TrainArgs(demo="trot", other_demos="none"), tmp_path)
+    again = _other_clips(TrainArgs.make(demo="trot", other_demos="none"), tmp_path)
     assert all(np.array_equal(a, b) for a, b in zip(clips, again)) and len(again) == 4
 
 
 def test_none_and_explicit_lists(tmp_path: Path) -> None:
-    assert _other_clips(TrainArgs(other_demos="none"), tmp_path / "a") == []
-    assert len(_other_clips(TrainArgs(other_demos="pace, bound"), tmp_path / "b")) == 2
+    assert _other_clips(TrainArgs.make(other_demos="none"), tmp_path / "a") == []
+    assert len(_other_clips(TrainArgs.make(other_demos="pace, bound"), tmp_path / "b")) == 2
     with pytest.raises(ValueError, match="cannot use"):
-        _other_clips(TrainArgs(other_demos="no_such_clip.xyz"), tmp_path / "c")
+        _other_clips(TrainArgs.make(other_demos="no_such_clip.xyz"), tmp_path / "c")
 
 
 def test_adversarial_weight_reaches_the_pair_sampler() -> None:
     frames = np.random.default_rng(0).integers(0, 255, (40, 48, 48), dtype=np.uint8)
     low = LearnedReward("virl", frames, 2, 1, 0, adversarial_weight=0.1)
-    assert low.model.cfg.pair_weights == {"expert_vs_agent": 0.1}
-    assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pair_weights == {}
+    assert low.model.cfg.pairs.pair_weights == {"expert_vs_agent": 0.1}
+    assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pairs.pair_weights == {}
     with pytest.raises(ValueError, match="adversarial-weight"):
-        validate(TrainArgs(adversarial_weight=-1.0))
+        validate(TrainArgs.make(adversarial_weight=-1.0))
 
 
 def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:
@@ -45,7 +45,7 @@ def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:
     from virl_quad.training import checkpoint
 
     spec = robots.get("pupper")
-    contract = policy_contract(spec, EnvConfig(action_scale=0.3, action_clip=1.5), 40)
+    contract = policy_contract(spec, EnvConfig.make(action_scale=0.3, action_clip=1.5), 40)
     data = {"contract": checkpoint.contract_payload(contract, spec)}
     got = checkpoint.contract_of(data, "pupper")
     assert got == contract and got.action_scale == 0.3 != spec.action_scale
@@ -59,7 +59,7 @@ def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:
 
 def test_an_unknown_ground_is_refused() -> None:
     with pytest.raises(ValueError, match="ground"):
-        validate(TrainArgs(ground="grass"))
+        validate(TrainArgs.make(ground="grass"))
 
 
 def test_a_checkpoint_with_retired_reward_settings_still_loads(tmp_path: Path) -> None:
@@ -80,7 +80,7 @@ def test_a_checkpoint_with_retired_reward_settings_still_loads(tmp_path: Path) -
                      "pair_weights": {**old["config"]["pair_weights"], "speed_shift": 0.25, "ground_shift": 1.0}}
     old["rollouts"] = 7
     with pytest.raises(TypeError):
-        RewardConfig(**old["config"])                     # not settings of today's config
+        RewardConfig.make(**old["config"])                     # not settings of today's config
 
     def same_weights(model) -> bool:
         mine = model.net.state_dict()
@@ -94,4 +94,22 @@ def test_a_checkpoint_with_retired_reward_settings_still_loads(tmp_path: Path) -
                                                    "config": {"robot": "pupper"}, "reward": old})
     save_npz(demo, tmp_path / "demo.npz")
     rm, _, _, robot = checkpoint.load_reward_model(tmp_path)
-    assert robot == "pupper" and rm.cfg.pair_weights == {"expert_vs_agent": 0.1} and same_weights(rm)
+    assert robot == "pupper" and rm.cfg.pairs.pair_weights == {"expert_vs_agent": 0.1} and same_weights(rm)
+
+
+def test_options_are_sections_by_concern_saved_flat_and_read_back() -> None:
+    """Sections in code and help, one flat {name: value} on disk (the command line's names), and
+    a saved config read back whole; an option the code no longer has is dropped, a new one
+    takes its default."""
+    from virl_quad.training.config import from_dict, to_dict
+
+    args = TrainArgs.make(robot="laikago", num_envs=4, reward_lr=3e-4, init_std=0.1, eval_every=5)
+    assert (args.run.robot, args.env.num_envs, args.distance.reward_lr, args.ppo.init_std,
+            args.eval.eval_every) == ("laikago", 4, 3e-4, 0.1, 5)
+    saved = to_dict(args)
+    assert saved["num_envs"] == 4 and all(not isinstance(v, dict) for v in saved.values())
+    assert from_dict(saved) == args
+    older = {k: v for k, v in saved.items() if k != "critic_warmup"} | {"retired_option": 1}
+    assert from_dict(older) == TrainArgs.make(**{**saved, "critic_warmup": TrainArgs().ppo.critic_warmup})
+    with pytest.raises(TypeError, match="no_such_option"):
+        TrainArgs.make(no_such_option=1)

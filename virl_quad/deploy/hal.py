@@ -36,7 +36,7 @@ import numpy as np
 import zenoh
 
 from virl_quad import robots
-from virl_quad.cli import Parser, UserError, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._record import Recorder
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
@@ -56,25 +56,27 @@ def _payload(sample: zenoh.Sample) -> bytes | None:
 class HalConfig:
     """Settings of one HAL process (the command line maps onto these fields)."""
 
-    robot: str = "pupper"                # robot spec name
-    backend: str = "sim"                 # backend registry name (sim, pupper_serial, loopback)
-    robot_id: str | None = None          # key chunk <id> in virl/<id>/...; default "<robot>-01"
-    zenoh: str = "peer"                  # Zenoh config: name in deploy/zenoh/ or a .json5 path
-    listen: list[str] | None = None      # listen endpoints replacing the config's
-    connect: list[str] | None = None     # connect endpoints replacing the config's
-    lockstep: bool = False               # advance one period per answered state (simulation)
-    lockstep_timeout: float | None = None  # s without an answer before ticking anyway; None: 3 x control_dt
-    cmd_wait: float = 0.5                # real time: fraction of control_dt to wait for the answer
-    arm: bool = False                    # arm at start (IDLE -> RAMP without an operator ARM)
-    reset_on_arm: bool = False           # sim: an accepted ARM first puts the robot back on its feet
-    randomize: bool = False              # sim: draw physics parameters (domain randomisation)
-    seed: int = 0                        # sim: randomisation seed
-    port: str | None = None              # pupper_serial: serial port, e.g. /dev/ttyACM0
-    status_hz: float = 5.0               # STATUS rate, Hz (also sent on every mode change)
-    record: str | None = None            # write the last 30000 ticks (state, applied command, mode) to this .npz
-    max_ticks: int = 0                   # stop after this many control periods (0: until SIGINT/SIGTERM)
+    robot: str = opt("pupper", "robot spec: " + ", ".join(robots.names()))
+    backend: str = opt("sim", "robot backend: " + ", ".join(backend_names()))
+    robot_id: str | None = opt(None, "robot instance id in the key expressions virl/<id>/... (unset: <robot>-01)")
+    zenoh: str = opt("peer", "Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    listen: list[str] | None = opt(None, "listen endpoint, replaces the config's")
+    connect: list[str] | None = opt(None, "connect endpoint, replaces the config's")
+    lockstep: bool = opt(False, "advance one control period per answered state (simulation, tests)")
+    lockstep_timeout: float | None = opt(None, "s without an answer before ticking anyway (unset: 3 x control_dt)")
+    cmd_wait: float = opt(0.5, "real time: fraction of a control period to wait for the answer to the state")
+    arm: bool = opt(False, "arm at start (IDLE -> RAMP) without an operator ARM")
+    reset_on_arm: bool = opt(False, "sim: an accepted ARM first puts the robot back on its feet (as an "
+                                    "operator would)")
+    randomize: bool = opt(False, "sim: randomise the physics (seed --seed)")
+    seed: int = opt(0, "sim: randomisation seed")
+    port: str | None = opt(None, "pupper_serial: serial port of the motor board, e.g. /dev/ttyACM0")
+    status_hz: float = opt(5.0, "STATUS rate, Hz (also sent on every mode change)")
+    record: str | None = opt(None, "write the last 30000 ticks (state, applied command, mode) to this .npz "
+                                   "when stopping")
+    max_ticks: int = opt(0, "stop after this many control periods (0: until SIGINT/SIGTERM)")
     safety: SafetyConfig = field(default_factory=SafetyConfig)
-    quiet: bool = False                  # no log lines on stderr
+    quiet: bool = opt(False, "no log lines on stderr")
 
 
 class Hal:
@@ -371,38 +373,9 @@ def main(config: HalConfig) -> int:
 
 
 def config_from_args(argv: list[str] | None = None) -> HalConfig:
-    """Parse the command line into a :class:`HalConfig`."""
-    d = HalConfig()                      # the defaults, written once (in the dataclass)
-    p = Parser(prog="python -m virl_quad.deploy.hal", description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", default=d.robot, help="robot spec: " + ", ".join(robots.names()))
-    p.add_argument("--backend", default=d.backend, help="robot backend: " + ", ".join(backend_names()))
-    p.add_argument("--robot-id", default=d.robot_id, help="robot instance id in the key expressions "
-                   "(unset: <robot>-01)")
-    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
-    p.add_argument("--listen", action="append", help="listen endpoint, replaces the config's (repeatable)")
-    p.add_argument("--connect", action="append", help="connect endpoint, replaces the config's (repeatable)")
-    p.add_argument("--lockstep", action="store_true", help="advance one control period per answered state")
-    p.add_argument("--lockstep-timeout", type=float, default=d.lockstep_timeout,
-                   help="s without an answer before ticking anyway (unset: 3 x control_dt)")
-    p.add_argument("--cmd-wait", type=float, default=d.cmd_wait,
-                   help="real time: fraction of a period to wait for the answer to the state")
-    p.add_argument("--arm", action="store_true", help="arm at start (IDLE -> RAMP) without an operator ARM")
-    p.add_argument("--reset-on-arm", action="store_true", help="sim: an accepted ARM first puts the robot "
-                   "back on its feet (as an operator would)")
-    p.add_argument("--randomize", action="store_true", help="sim: randomise the physics (seed --seed)")
-    p.add_argument("--seed", type=int, default=d.seed, help="sim: randomisation seed")
-    p.add_argument("--port", default=d.port, help="pupper_serial: serial port of the motor board")
-    p.add_argument("--status-hz", type=float, default=d.status_hz, help="STATUS rate, Hz")
-    p.add_argument("--record", default=d.record, help="write every tick to this .npz when stopping")
-    p.add_argument("--max-ticks", type=int, default=d.max_ticks, help="stop after this many control periods "
-                   "(0: never)")
-    p.add_argument("--quiet", action="store_true", help="no log lines")
-    a = p.parse_args(sys.argv[1:] if argv is None else argv)
-    return HalConfig(robot=a.robot, backend=a.backend, robot_id=a.robot_id, zenoh=a.zenoh, listen=a.listen,
-                     connect=a.connect, lockstep=a.lockstep, lockstep_timeout=a.lockstep_timeout,
-                     cmd_wait=a.cmd_wait, arm=a.arm, reset_on_arm=a.reset_on_arm, randomize=a.randomize,
-                     seed=a.seed, port=a.port, status_hz=a.status_hz, record=a.record, max_ticks=a.max_ticks,
-                     quiet=a.quiet)
+    """Parse the command line into a :class:`HalConfig` (its fields are the options)."""
+    p = parser_from_dataclass(HalConfig, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.deploy.hal")
+    return dataclass_from_args(HalConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

@@ -24,14 +24,14 @@ from typing import Any, Callable
 
 import zenoh
 
-from virl_quad.cli import Parser, UserError, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import StopFlag, open_config, open_session
 from virl_quad.deploy.protocol import MsgType, ProtocolError
 from virl_quad.deploy.safety import CLAMPS
-from virl_quad.deploy.zenoh_config import load_config, publisher_options
+from virl_quad.deploy.zenoh_config import DEFAULT_CONNECT, load_config, publisher_options
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+ACTIONS = ("status", "arm", "estop")
 
 
 def wait_until(pred: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
@@ -53,7 +53,8 @@ def format_status(status: dict[str, Any], state: P.RobotState | None = None) -> 
     dt = status.get("control_dt")                                  # s
     active = status.get("active_ticks")
     lines = [f"{status.get('robot_id', '?')} ({status.get('robot', '?')}, {status.get('backend', '?')} backend)  "
-             f"mode {status.get('mode', '?')}  fault: {status.get('fault') or 'none'}"]
+             f"mode {status.get('mode', '?')}{' (E-stop received: DAMPING from the next tick)' if status.get('estop_pending') else ''}"
+             f"  fault: {status.get('fault') or 'none'}"]
     motion = []
     if state is not None and state.base_pos is not None:
         motion.append(f"base height {state.base_pos[2]:.3f} m")
@@ -172,14 +173,14 @@ class Operator:
 class OperatorConfig:
     """One operator command."""
 
-    action: str                          # status | arm | estop
-    robot_id: str = "pupper-01"          # the HAL's robot id
-    zenoh: str = "peer"                  # Zenoh config name or .json5 path
-    connect: list[str] | None = None     # endpoints; default the config's, else DEFAULT_CONNECT
-    reason: str = "operator"             # estop: reason shown in STATUS fault
-    wait: float = 10.0                   # s to wait for the HAL and for the effect
-    watch: bool = False                  # keep showing the newest STATUS every second until Ctrl-C
-    json: bool = False                   # print raw STATUS bodies as JSON lines (for scripts)
+    action: str = opt("status", "what to do", choices=ACTIONS, positional=True)
+    robot_id: str = opt("pupper-01", "the HAL's robot id")
+    zenoh: str = opt("peer", "Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    connect: list[str] | None = opt(None, f"HAL endpoint (unset: the config's, else {DEFAULT_CONNECT})")
+    reason: str = opt("operator", "estop: reason shown in the STATUS fault")
+    wait: float = opt(10.0, "s to wait for the HAL and for the effect")
+    watch: bool = opt(False, "keep showing the newest STATUS every second until Ctrl-C")
+    json: bool = opt(False, "raw STATUS bodies as JSON lines, for scripts")
 
 
 def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
@@ -197,8 +198,8 @@ def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
 
 def main(config: OperatorConfig) -> int:
     """Run one operator command; 0 if the HAL confirmed it in STATUS, 1 if not."""
-    if config.action not in ("status", "arm", "estop"):
-        raise UserError(f"unknown action {config.action!r}; choose status, arm or estop")
+    if config.action not in ACTIONS:
+        raise UserError(f"unknown action {config.action!r}; choose {', '.join(ACTIONS)}")
     conf = open_config(config.zenoh, listen=[], connect=config.connect)
     if not config.connect and conf.get_json("connect/endpoints").strip() in ("[]", "null"):
         conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
@@ -232,19 +233,10 @@ def main(config: OperatorConfig) -> int:
 
 
 def config_from_args(argv: list[str] | None = None) -> OperatorConfig:
-    """Parse the command line into an :class:`OperatorConfig`."""
-    d = OperatorConfig("status")         # the defaults, written once (in the dataclass)
-    p = Parser(prog="python -m virl_quad.deploy.operator", description=__doc__.split("\n\n")[0])
-    p.add_argument("action", choices=["status", "arm", "estop"], help="what to do")
-    p.add_argument("--robot-id", default=d.robot_id, help="the HAL's robot id")
-    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config name or .json5 path")
-    p.add_argument("--connect", action="append", help=f"HAL endpoint (unset: the config's, else {DEFAULT_CONNECT})")
-    p.add_argument("--reason", default=d.reason, help="estop: reason text")
-    p.add_argument("--wait", type=float, default=d.wait, help="s to wait for the HAL and for the effect")
-    p.add_argument("--watch", action="store_true", help="keep showing the newest STATUS every second until Ctrl-C")
-    p.add_argument("--json", action="store_true", help="raw STATUS bodies as JSON lines, for scripts")
-    a = p.parse_args(sys.argv[1:] if argv is None else argv)
-    return OperatorConfig(a.action, a.robot_id, a.zenoh, a.connect, a.reason, a.wait, a.watch, a.json)
+    """Parse the command line into an :class:`OperatorConfig` (its fields are the options)."""
+    p = parser_from_dataclass(OperatorConfig, description=__doc__.split("\n\n")[0],
+                              prog="python -m virl_quad.deploy.operator")
+    return dataclass_from_args(OperatorConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

@@ -424,4 +424,5 @@ class SafetyController:
                 "rejected": dict(self.rejected), "clamped": dict(self.clamped), "events": dict(self.events),
                 "rejected_other": dict(self.rejected_other),
                 "last_seq": self._last_seq,
+                "estop_pending": bool(self._estop_pending),
             }

@@ -41,10 +41,11 @@ import numpy as np
 import torch
 import zenoh
 
-from virl_quad.cli import Parser, UserError, run_main
+from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
 from virl_quad.deploy.protocol import MsgType, ProtocolError
+from virl_quad.deploy.zenoh_config import DEFAULT_CONNECT
 from virl_quad.policy.action import ActionMap
 from virl_quad.policy.observation import policy_observation, yaw
 
@@ -60,21 +61,21 @@ def default_policy() -> Path:
     return next((p for p in SHIPPED_POLICIES if p.is_file()), SHIPPED_POLICIES[0])
 
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"     # the HAL's listen endpoint in deploy/zenoh/peer.json5
 
 
 @dataclass
 class ServeConfig:
     """Settings of one policy-server process."""
 
-    policy: str = ""                     # exported policy NAME.pt (NAME.json beside it); "": default_policy()
-    robot_id: str | None = None          # HAL's robot id; default "<policy robot>-01"
-    zenoh: str = "peer"                  # Zenoh config: name in deploy/zenoh/ or a .json5 path
-    connect: list[str] | None = None     # connect endpoints; default the config's, else DEFAULT_CONNECT
-    listen: list[str] | None = None      # listen endpoints; default none
-    wait: float = 30.0                   # s to wait for the HAL at start (0: forever)
-    threads: int = 1                     # torch intra-op threads (1 is fastest for small MLPs)
-    quiet: bool = False                  # no log lines on stderr
+    policy: str = opt("", "exported policy NAME.pt, NAME.json beside it (empty: the first present of "
+                      + ", ".join(str(x.relative_to(_POLICIES.parent)) for x in SHIPPED_POLICIES) + ")")
+    robot_id: str | None = opt(None, "the HAL's robot id (unset: <policy robot>-01)")
+    zenoh: str = opt("peer", "Zenoh config: name in deploy/zenoh/ or a .json5 path")
+    connect: list[str] | None = opt(None, f"endpoint of the HAL (unset: the config's, else {DEFAULT_CONNECT})")
+    listen: list[str] | None = opt(None, "listen endpoint (unset: none)")
+    wait: float = opt(30.0, "s to wait for the HAL at start (0: forever)")
+    threads: int = opt(1, "torch intra-op threads (1 is fastest for small MLPs)")
+    quiet: bool = opt(False, "no log lines on stderr")
 
 
 class PolicyRunner:
@@ -356,22 +357,9 @@ def main(config: ServeConfig) -> int:
 
 
 def config_from_args(argv: list[str] | None = None) -> ServeConfig:
-    """Parse the command line into a :class:`ServeConfig`."""
-    d = ServeConfig()                    # the defaults, written once (in the dataclass)
-    p = Parser(prog="python -m virl_quad.deploy.serve", description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", default=d.policy, help="exported policy NAME.pt (empty: the first present of "
-                   + ", ".join(str(x.relative_to(_POLICIES.parent)) for x in SHIPPED_POLICIES) + ")")
-    p.add_argument("--robot-id", default=d.robot_id, help="the HAL's robot id (unset: <policy robot>-01)")
-    p.add_argument("--zenoh", default=d.zenoh, help="Zenoh config: name in deploy/zenoh/ or a .json5 path")
-    p.add_argument("--connect", action="append", help=f"endpoint of the HAL (repeatable; unset: the config's, "
-                   f"else {DEFAULT_CONNECT})")
-    p.add_argument("--listen", action="append", help="listen endpoint (repeatable)")
-    p.add_argument("--wait", type=float, default=d.wait, help="s to wait for the HAL at start (0: forever)")
-    p.add_argument("--threads", type=int, default=d.threads, help="torch threads")
-    p.add_argument("--quiet", action="store_true", help="no log lines")
-    a = p.parse_args(sys.argv[1:] if argv is None else argv)
-    return ServeConfig(policy=a.policy, robot_id=a.robot_id, zenoh=a.zenoh, connect=a.connect, listen=a.listen,
-                       wait=a.wait, threads=a.threads, quiet=a.quiet)
+    """Parse the command line into a :class:`ServeConfig` (its fields are the options)."""
+    p = parser_from_dataclass(ServeConfig, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.deploy.serve")
+    return dataclass_from_args(ServeConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

@@ -31,6 +31,10 @@ PATH_KEYS: tuple[str, ...] = (
 
 Endpoints = Union[str, Iterable[str], None]
 
+#: where a policy server or an operator looks for the HAL when neither the command line nor the
+#: Zenoh config names an endpoint: the HAL's listen endpoint in deploy/zenoh/peer.json5
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
 
 def config_path(name: Union[str, Path]) -> Path:
     """Path of a config: a file path, or a name in CONFIG_DIR ("peer", "secure", ...)."""

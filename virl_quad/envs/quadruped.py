@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 import numpy as np
+
+from virl_quad.cli import replace_options
 
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
@@ -33,6 +35,7 @@ from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
 from virl_quad.sim.camera import FRAME_SIZE
 from virl_quad.sim.params import DEFAULT_GROUND, PhysicsParams
+from virl_quad.sim.pd import PD_MODES
 from virl_quad.sim.world import SimState, World
 
 # Nominal measurement noise std (x the episode's obs_noise draw), as legged_gym.
@@ -44,37 +47,72 @@ PRIVILEGED_SIZE = 3 + 1 + 4 + PhysicsParams.vector_size()
 
 
 @dataclass
-class EnvConfig:
-    """Options of :class:`QuadrupedEnv` (all overridable through ``virl_quad.envs.make``)."""
+class EpisodeConfig:
+    """How an episode starts and ends."""
 
     episode_seconds: float | None = None   # s, time limit; None = the robot's default
     time_limit: bool = True                # truncate at episode_seconds (the VecEnv does it itself)
+    terminate_on_fall: bool = True         # end the episode when the robot falls
+    rsi: bool = True                       # reference state initialisation when the demo has a motion
+
+
+@dataclass
+class ActionConfig:
+    """What an action means (the policy contract's action facts)."""
+
     action_scale: float | None = None      # rad per unit action; None = the robot's default
     action_clip: float = 2.0               # |a| is clipped to this before scaling
     max_target_step: float | None = MAX_TARGET_STEP  # rad per control period a PD target may move
                                            # (the deploy safety layer's limit); None: unlimited
-    randomize: bool = True                 # domain randomisation on/off
-    randomization: dict | None = None      # per-parameter range overrides, see DRConfig
-    render: bool = True                    # produce agent_image (off: a blank frame, faster)
-    ground: str | None = None              # what the camera sees of the ground, "checker" or "plain";
-                                           # None: the demonstration's, else DEFAULT_GROUND
-    demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
-    rsi: bool = True                       # reference state initialisation when the demo has a motion
-    terminate_on_fall: bool = True         # end the episode when the robot falls
-    oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
+    tg: TGParams | None = None             # trajectory generator the policy acts as a residual on (action
+                                           # size 14); None: actions are offsets from the default pose (12)
+
+
+@dataclass
+class PhysicsConfig:
+    """How the physics is stepped and randomised."""
+
     sim_dt: float | None = None            # s, physics step; None = the robot's default
     substeps: int | None = None            # physics steps per control step; None = the robot's default
     pd: str = "implicit"                   # how the joint PD is stepped: "implicit" (PyBullet's joint motors)
                                            # or "explicit" (torques; needs a 1 ms physics step on Pupper),
                                            # see virl_quad.sim.pd
-    tg: TGParams | None = None             # trajectory generator the policy acts as a residual on (action
-                                           # size 14); None: actions are offsets from the default pose (12)
+    randomize: bool = True                 # domain randomisation on/off
+    randomization: dict | None = None      # per-parameter range overrides, see DRConfig
+
+
+@dataclass
+class CameraConfig:
+    """What the follow camera renders."""
+
+    render: bool = True                    # produce agent_image (off: a blank frame, faster)
+    ground: str | None = None              # what the camera sees of the ground, "checker" or "plain";
+                                           # None: the demonstration's, else DEFAULT_GROUND
+
+
+@dataclass
+class EnvConfig:
+    """Options of :class:`QuadrupedEnv`, by concern; ``virl_quad.envs.make`` and
+    :meth:`make` take them by their flat names (``action_scale=0.3``)."""
+
+    demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
+    oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    action: ActionConfig = field(default_factory=ActionConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+
+    @classmethod
+    def make(cls, **values: object) -> EnvConfig:
+        """A config with the named options (flat names) changed from the defaults; TypeError for
+        an unknown name."""
+        return replace_options(cls(), **values)
 
 
 def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:
     """The spec with the config's physics step / substeps, validated."""
-    dt = spec.sim_dt if cfg.sim_dt is None else float(cfg.sim_dt)
-    n = spec.substeps if cfg.substeps is None else int(cfg.substeps)
+    dt = spec.sim_dt if cfg.physics.sim_dt is None else float(cfg.physics.sim_dt)
+    n = spec.substeps if cfg.physics.substeps is None else int(cfg.physics.substeps)
     if not (0 < dt <= 0.01) or n < 1:
         raise ValueError(f"sim_dt must be in (0, 0.01] s and substeps >= 1, got {dt} s and {n}")
     return dataclasses.replace(spec, sim_dt=dt, substeps=n) if (dt, n) != (spec.sim_dt, spec.substeps) else spec
@@ -84,22 +122,44 @@ def _ground(cfg: EnvConfig) -> str:
     """The ground to draw: the config's, else the demonstration's, else the default; ValueError
     when the config and the demonstration disagree (the frames would differ in more than motion)."""
     demo_ground = (cfg.demo.camera or {}).get("ground") if cfg.demo is not None else None
-    if cfg.ground is not None and demo_ground is not None and demo_ground != cfg.ground:
+    if cfg.camera.ground is not None and demo_ground is not None and demo_ground != cfg.camera.ground:
         raise ValueError(f"the demonstration was rendered on the {demo_ground!r} ground, the env would draw "
-                         f"{cfg.ground!r}: agent and expert frames would differ in more than the motion")
-    return cfg.ground or demo_ground or DEFAULT_GROUND
+                         f"{cfg.camera.ground!r}: agent and expert frames would differ in more than the motion")
+    return cfg.camera.ground or demo_ground or DEFAULT_GROUND
 
 
 def policy_contract(spec: RobotSpec, cfg: EnvConfig, demo_frames: int | None) -> PolicyContract:
     """The policy contract of an env for ``spec`` with ``cfg`` whose demonstration has ``demo_frames``
     frames (None: no demonstration): action scale, clip and rate limit, the TG, and the phase clock
     (the TG's, else one cycle per demonstration loop, else none)."""
-    if cfg.tg is not None and not isinstance(cfg.tg, TGParams):
-        raise ValueError(f"tg must be TGParams or None, got {type(cfg.tg).__name__}")
-    scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
-    phase_hz = 1.0 / (demo_frames * spec.control_dt) if cfg.tg is None and demo_frames else None
-    return PolicyContract(float(scale), float(cfg.action_clip), cfg.max_target_step, spec.control_dt, cfg.tg,
+    if cfg.action.tg is not None and not isinstance(cfg.action.tg, TGParams):
+        raise ValueError(f"tg must be TGParams or None, got {type(cfg.action.tg).__name__}")
+    scale = cfg.action.action_scale if cfg.action.action_scale is not None else spec.action_scale
+    phase_hz = 1.0 / (demo_frames * spec.control_dt) if cfg.action.tg is None and demo_frames else None
+    return PolicyContract(float(scale), float(cfg.action.action_clip), cfg.action.max_target_step, spec.control_dt, cfg.action.tg,
                           phase_hz)
+
+
+def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, PolicyContract]:
+    """The robot (with the config's physics step) and policy contract of an env of ``cfg``,
+    every option checked as :class:`QuadrupedEnv` would, without a simulator: ValueError (one
+    line) for a bad physics step or PD mode, a ground the demonstration was not rendered on, a
+    demonstration at another frame rate, bad randomisation ranges, a TG out of the robot's reach,
+    or an oracle reward without a reference motion."""
+    spec = _with_timing(spec, cfg)
+    if cfg.physics.pd not in PD_MODES:
+        raise ValueError(f"unknown PD mode {cfg.physics.pd!r}; choose one of: {', '.join(PD_MODES)}")
+    _ground(cfg)
+    DRConfig.from_overrides(cfg.physics.randomization, DRConfig.for_robot(spec))
+    demo = cfg.demo
+    if demo is not None and abs(demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
+        raise ValueError(f"demonstration is at {demo.fps:.3f} fps but {spec.name} is controlled at "
+                         f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
+    if cfg.oracle_reward and (demo is None or demo.motion is None):
+        raise ValueError("oracle_reward needs a demonstration with a reference motion")
+    contract = policy_contract(spec, cfg, demo.num_frames if demo is not None else None)
+    ActionMap(spec, contract)                                   # the TG within reach and joint limits
+    return spec, contract
 
 
 class QuadrupedEnv(gym.Env):
@@ -108,20 +168,16 @@ class QuadrupedEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
     def __init__(self, spec: RobotSpec, cfg: EnvConfig, render_mode: str | None = None) -> None:
-        spec = _with_timing(spec, cfg)
+        spec, self.contract = checked(spec, cfg)
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
-        self.world = World(spec, ground=_ground(cfg), pd=cfg.pd)
-        self.dr = DRConfig.from_overrides(cfg.randomization, DRConfig.for_robot(spec) if cfg.randomize else DRConfig.off())
+        self.world = World(spec, ground=_ground(cfg), pd=cfg.physics.pd)
+        self.dr = DRConfig.from_overrides(cfg.physics.randomization, DRConfig.for_robot(spec) if cfg.physics.randomize else DRConfig.off())
         self.demo = cfg.demo
-        if self.demo is not None and abs(self.demo.fps - spec.control_hz) > 1e-3 * spec.control_hz:
-            raise ValueError(f"demonstration is at {self.demo.fps:.3f} fps but {spec.name} is controlled at "
-                             f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
-        self.action_scale = cfg.action_scale if cfg.action_scale is not None else spec.action_scale
-        seconds = cfg.episode_seconds if cfg.episode_seconds is not None else spec.episode_seconds
+        self.action_scale = cfg.action.action_scale if cfg.action.action_scale is not None else spec.action_scale
+        seconds = cfg.episode.episode_seconds if cfg.episode.episode_seconds is not None else spec.episode_seconds
         self.max_steps = int(round(seconds / spec.control_dt))
-        self.contract = policy_contract(spec, cfg, self.demo.num_frames if self.demo is not None else None)
         self.actions = ActionMap(spec, self.contract)
         n_policy = self.contract.observation_size
         image = gym.spaces.Box(0, 255, (FRAME_SIZE, FRAME_SIZE), np.uint8)
@@ -133,7 +189,7 @@ class QuadrupedEnv(gym.Env):
         if self.demo is not None:
             spaces["expert_image"] = image
         self.observation_space = gym.spaces.Dict(spaces)
-        self.action_space = gym.spaces.Box(-cfg.action_clip, cfg.action_clip, (self.contract.action_size,), np.float32)
+        self.action_space = gym.spaces.Box(-cfg.action.action_clip, cfg.action.action_clip, (self.contract.action_size,), np.float32)
         self.rand: Randomization = sample(DRConfig.off(), np.random.default_rng(0), spec)
         self.start_yaw = 0.0                                      # rad, the base's yaw at reset
         self.steps = 0
@@ -143,8 +199,6 @@ class QuadrupedEnv(gym.Env):
         self._state: SimState | None = None
         self._kin = None
         if cfg.oracle_reward:
-            if self.demo is None or self.demo.motion is None:
-                raise ValueError("oracle_reward needs a demonstration with a reference motion")
             from virl_quad.kinematics import Kinematics
 
             self._kin = Kinematics(spec)
@@ -176,7 +230,7 @@ class QuadrupedEnv(gym.Env):
 
     def _place_robot(self) -> None:
         motion = self.demo.motion if self.demo is not None else None
-        if motion is None or not self.cfg.rsi:
+        if motion is None or not self.cfg.episode.rsi:
             self.world.reset()
             return
         ref = motion.state_at(self.demo_step / self.demo.fps)
@@ -194,8 +248,8 @@ class QuadrupedEnv(gym.Env):
             self._push()
         self._state = s = self.world.state()
         self._remember(s)
-        terminated = self.cfg.terminate_on_fall and self._fallen(s)
-        truncated = self.cfg.time_limit and self.steps >= self.max_steps and not terminated
+        terminated = self.cfg.episode.terminate_on_fall and self._fallen(s)
+        truncated = self.cfg.episode.time_limit and self.steps >= self.max_steps and not terminated
         reward = self._oracle_reward(s) if self._kin is not None else 0.0
         return self._observation(), reward, bool(terminated), bool(truncated), self._info()
 
@@ -263,7 +317,7 @@ class QuadrupedEnv(gym.Env):
         return out
 
     def _agent_image(self) -> np.ndarray:
-        if not self.cfg.render:
+        if not self.cfg.camera.render:
             return np.zeros((FRAME_SIZE, FRAME_SIZE), np.uint8)
         return self.world.render(cam=self.rand.camera)
 

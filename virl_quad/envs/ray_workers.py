@@ -9,9 +9,11 @@ was started and sends each step's actions to every actor at once. Actors are nam
 from __future__ import annotations
 
 import logging
+import socket
 
 from virl_quad.cli import UserError
 from virl_quad.envs.workers import EnvWorkerLost, Slice
+from virl_quad.robots.spec import RobotSpec
 
 NAMESPACE = "virl_quad"
 START_S = 300.0   # s an actor may take to start (Ray schedules it once the cluster has a free CPU)
@@ -33,6 +35,7 @@ def connect(address: str | None = None) -> None:
     ray = _ray()
     if ray.is_initialized():
         return
+    check_address(address)
     try:
         ray.init(address=address or None, namespace=NAMESPACE, include_dashboard=False,
                  log_to_driver=False, logging_level=logging.WARNING, configure_logging=True)
@@ -40,10 +43,28 @@ def connect(address: str | None = None) -> None:
         raise UserError(f"cannot join the Ray cluster at {address!r}: {str(exc).splitlines()[0]}") from None
 
 
+REACH_S = 5.0     # s, how long a cluster address may take to accept a TCP connection
+
+
+def check_address(address: str | None) -> None:
+    """UserError at once when a ``host:port`` address has nothing listening (Ray itself would
+    retry for minutes); ``auto``, ``ray://`` and empty addresses are left to Ray."""
+    if not address or address == "auto" or "://" in address:
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit():
+        raise UserError(f"--ray-address must be auto or HOST:PORT, got {address!r}")
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=REACH_S).close()
+    except OSError as exc:
+        raise UserError(f"cannot reach a Ray cluster at {address} ({exc.strerror or exc}): start one with "
+                        f"`ray start --head`, or leave --ray-address empty for a local one") from None
+
+
 class _SliceActor:
     """One slice inside a Ray actor process (one torch thread: the actor owns one CPU)."""
 
-    def __init__(self, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
+    def __init__(self, robot: str | RobotSpec, env_ids: list[int], seed: int, overrides: dict) -> None:
         import torch
 
         torch.set_num_threads(1)
@@ -61,7 +82,7 @@ class _SliceActor:
 class RayActors:
     """One slice per Ray actor (``address``: see :func:`connect`; ``prefix``: actor names)."""
 
-    def __init__(self, robot: str, ids: list[list[int]], seed: int, overrides: dict,
+    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict,
                  address: str | None = None, prefix: str = "") -> None:
         ray = _ray()
         connect(address)

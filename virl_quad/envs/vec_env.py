@@ -28,7 +28,10 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from virl_quad.envs import make
+from virl_quad import robots
+from virl_quad.envs import options_of
+from virl_quad.envs.quadruped import checked
+from virl_quad.robots.spec import RobotSpec
 from virl_quad.envs.workers import EnvWorkerLost, InProcess, Processes
 
 __all__ = ["QuadrupedVecEnv", "EnvWorkerLost", "WORKER_KINDS"]
@@ -43,23 +46,22 @@ class QuadrupedVecEnv(VecEnv):
     """``num_envs`` quadruped envs for rsl-rl, over ``num_workers`` workers of ``workers_kind``
     (local processes, or Ray actors on the cluster at ``ray_address``, named with ``actor_prefix``)."""
 
-    def __init__(self, robot: str, num_envs: int, *, num_workers: int | None = None, seed: int = 0,
+    def __init__(self, robot: str | RobotSpec, num_envs: int, *, num_workers: int | None = None, seed: int = 0,
                  device: str = "cpu", episode_seconds: float | None = None, workers_kind: str = "local",
                  ray_address: str | None = None, actor_prefix: str = "", **overrides: Any) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        probe = make(robot, **overrides)  # validates the robot and overrides here, with a clear error
-        spec = probe.unwrapped.robot
-        #: the policy contract of these envs (action size, scale, clip, rate limit, TG, clock)
-        self.contract = probe.unwrapped.contract
-        probe.close()
+        robot = robots.get(robot) if isinstance(robot, str) else robot
+        #: the policy contract of these envs (action size, scale, clip, rate limit, TG, clock);
+        #: every option is checked here, in this process, with a clear error
+        spec, self.contract = checked(robot, options_of(overrides))
         seconds = episode_seconds if episode_seconds is not None else spec.episode_seconds
         self.num_envs = num_envs
         self.num_actions = self.contract.action_size   # 12, or 14 with a trajectory generator
         self.max_episode_length = int(round(seconds / spec.control_dt))
         self.device = torch.device(device)
         self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long, device=self.device)
-        self.cfg = {"robot": robot, "num_envs": num_envs, "seed": seed, "episode_seconds": seconds,
+        self.cfg = {"robot": spec.name, "num_envs": num_envs, "seed": seed, "episode_seconds": seconds,
                     **{k: v for k, v in overrides.items() if k not in ("demo", "tg")},
                     "tg": None if self.contract.tg is None else self.contract.tg.to_dict()}
         self.spec = spec

@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from virl_quad.envs import make
+from virl_quad.robots.spec import RobotSpec
 
 IMAGE_KEYS = ("agent_image", "expert_image")
 
@@ -35,7 +36,7 @@ class EnvWorkerLost(RuntimeError):
 class Slice:
     """A group of envs stepped together (runs inside a worker or in-process)."""
 
-    def __init__(self, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
+    def __init__(self, robot: str | RobotSpec, env_ids: list[int], seed: int, overrides: dict) -> None:
         self.envs = [make(robot, time_limit=False, **overrides) for _ in env_ids]
         self.seeds = [seed + i for i in env_ids]
 
@@ -71,7 +72,7 @@ def stack(dicts: list[dict]) -> dict:
 class InProcess:
     """Every env in one slice in this process."""
 
-    def __init__(self, robot: str, ids: list[list[int]], seed: int, overrides: dict) -> None:
+    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict) -> None:
         self.slice = Slice(robot, [i for chunk in ids for i in chunk], seed, overrides)
 
     def call(self, cmd: str, per_worker_args: list[tuple]) -> list:
@@ -85,7 +86,7 @@ class InProcess:
             self.slice = None
 
 
-def _worker(conn, robot: str, env_ids: list[int], seed: int, overrides: dict) -> None:
+def _worker(conn, robot: str | RobotSpec, env_ids: list[int], seed: int, overrides: dict) -> None:
     """Worker process loop: build a slice, then serve commands until 'close'. Ctrl-C is the
     parent's to handle (it checkpoints and closes the workers): a worker ignores SIGINT."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -111,7 +112,7 @@ def _worker(conn, robot: str, env_ids: list[int], seed: int, overrides: dict) ->
 class Processes:
     """One slice per ``multiprocessing`` worker process (spawned: no inherited PyBullet state)."""
 
-    def __init__(self, robot: str, ids: list[list[int]], seed: int, overrides: dict) -> None:
+    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict) -> None:
         ctx = mp.get_context("spawn")
         self._procs, self._conns = [], []
         # a new process inherits an ignored SIGINT, so a Ctrl-C while it starts up is not its to report

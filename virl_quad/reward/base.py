@@ -85,16 +85,16 @@ class RewardModel:
                  device: str | torch.device = "cpu") -> None:
         self.cfg, self.seed, self.device = cfg, int(seed), torch.device(device)
         self._raw = (demo, clips)                    # as given: what a checkpoint saves
-        levels = background_levels(demo) if cfg.paint_background else np.zeros(0, np.int64)
+        levels = background_levels(demo) if cfg.pairs.paint_background else np.zeros(0, np.int64)
         self._levels = levels                                    # gray levels painted white
         self._levels_t = torch.from_numpy(levels).to(self.device)
         self.demo, self.clips = paint(demo, levels), [paint(c, levels) for c in clips]   # what the model sees
-        self.dataset = EpisodeStore(cfg.max_bytes, cfg.max_episode_frames)
+        self.dataset = EpisodeStore(cfg.store.max_bytes, cfg.store.max_episode_frames)
         with torch.random.fork_rng(devices=[]):  # seeded weight init, caller's global RNG untouched
             torch.manual_seed(self.seed)
             self.net = self._build_net().to(self.device).eval()
-        self.reward_net = copy.deepcopy(self.net) if cfg.ema > 0 else self.net   # what rewards come from
-        self.trainer = Trainer(self.net, self._loss, cfg.lr, cfg.grad_clip, self.seed)
+        self.reward_net = copy.deepcopy(self.net) if cfg.optim.ema > 0 else self.net   # what rewards come from
+        self.trainer = Trainer(self.net, self._loss, cfg.optim.lr, cfg.optim.grad_clip, self.seed)
 
     # -- to be provided by a variant ---------------------------------------------------------
     def _build_net(self) -> nn.Module:
@@ -116,7 +116,7 @@ class RewardModel:
 
     # -- data and training -------------------------------------------------------------------
     def _paint(self, frames, name: str, axes: str) -> np.ndarray:
-        """Checked uint8 frames with the background painted (``cfg.paint_background``)."""
+        """Checked uint8 frames with the background painted (``cfg.pairs.paint_background``)."""
         return paint(to_uint8(frames, name, axes), self._levels)
 
     def _float(self, frames, name: str, axes: str) -> torch.Tensor:
@@ -142,7 +142,7 @@ class RewardModel:
         """
         logs = self.trainer.update(num_updates)
         if self.reward_net is not self.net:
-            keep = self.cfg.ema ** num_updates          # one EMA step per update, applied at once
+            keep = self.cfg.optim.ema ** num_updates          # one EMA step per update, applied at once
             with torch.no_grad():
                 for slow, fast in zip(self.reward_net.parameters(), self.net.parameters()):
                     slow.mul_(keep).add_(fast, alpha=1.0 - keep)
@@ -165,7 +165,7 @@ class RewardModel:
             raise ValueError(f"state is for {state.num_envs} envs of this variant, frames for {n}")
 
     def _reward(self, d: torch.Tensor) -> torch.Tensor:
-        return torch.exp(self.cfg.w_d * d.square()).clamp(min=self.cfg.reward_floor, max=1.0)
+        return torch.exp(self.cfg.reward.w_d * d.square()).clamp(min=self.cfg.reward.reward_floor, max=1.0)
 
     def stream_step(self, agent, expert, state: StreamState, reset_mask=None
                     ) -> tuple[torch.Tensor, StreamState]:

@@ -29,13 +29,13 @@ class PairDiscriminator(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.conv1 = nn.Conv2d(2, cfg.conv1_filters, cfg.conv1_kernel, cfg.conv1_stride)
-        self.drop = nn.Dropout2d(cfg.dropout)  # whole feature maps: far cheaper on CPU than per-unit
-        self.conv2 = nn.Conv2d(cfg.conv1_filters, cfg.conv2_filters, cfg.conv2_kernel, cfg.conv2_stride)
-        n2 = conv_out(conv_out(cfg.image_size, cfg.conv1_kernel, cfg.conv1_stride), cfg.conv2_kernel,
-                      cfg.conv2_stride)
-        self.fc = nn.Linear(cfg.conv2_filters * n2 * n2, cfg.dense_units)
-        self.out = nn.Linear(cfg.dense_units, 1)
+        self.conv1 = nn.Conv2d(2, cfg.arch.conv1_filters, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
+        self.drop = nn.Dropout2d(cfg.arch.dropout)  # whole feature maps: far cheaper on CPU than per-unit
+        self.conv2 = nn.Conv2d(cfg.arch.conv1_filters, cfg.arch.conv2_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
+        n2 = conv_out(conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride), cfg.arch.conv2_kernel,
+                      cfg.arch.conv2_stride)
+        self.fc = nn.Linear(cfg.arch.conv2_filters * n2 * n2, cfg.arch.dense_units)
+        self.out = nn.Linear(cfg.arch.dense_units, 1)
 
     def forward(self, prev: torch.Tensor, cur: torch.Tensor) -> torch.Tensor:
         """Frames [B, H, W] each (in [0, 1]) -> logits [B]."""
@@ -58,7 +58,7 @@ class GaifoReward(RewardModel):
 
     def _expert_pairs(self, rng: np.random.Generator, k: int) -> tuple[np.ndarray, np.ndarray]:
         T = self.demo.shape[0]
-        i = rng.integers(0, T if self.cfg.clips_cyclic else T - 1, size=k)
+        i = rng.integers(0, T if self.cfg.pairs.clips_cyclic else T - 1, size=k)
         j = (i + 1) % T
         return self.demo[i], self.demo[j]
 
@@ -79,7 +79,7 @@ class GaifoReward(RewardModel):
         return np.stack(prev), np.stack(cur)
 
     def _loss(self, rng: np.random.Generator) -> tuple[torch.Tensor, dict[str, float]]:
-        k = self.cfg.batch_pairs
+        k = self.cfg.pairs.batch_pairs
         ep, ec = self._expert_pairs(rng, k)
         ap, ac = self._agent_pairs(rng, k)
         prev = torch.from_numpy(np.concatenate([ep, ap]).astype(np.float32) * _SCALE).to(self.device)
@@ -98,6 +98,6 @@ class GaifoReward(RewardModel):
         prev = torch.where(resets[..., None, None], agent, before)      # a new episode pairs (o_0, o_0)
         p, c = prev.reshape(-1, FRAME, FRAME), agent.reshape(-1, FRAME, FRAME)
         logits = torch.cat([self.reward_net(p[i:i + _CHUNK], c[i:i + _CHUNK]) for i in range(0, p.shape[0], _CHUNK)])
-        d = (F.softplus(-logits) / -self.cfg.w_d).sqrt().reshape(T, n)
+        d = (F.softplus(-logits) / -self.cfg.reward.w_d).sqrt().reshape(T, n)
         new = StreamState(state.h, state.c, agent[-1].clone(), torch.zeros_like(state.fresh))
         return d, new

@@ -108,27 +108,6 @@ def unique_frames(frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return frames[first], inverse
 
 
-GP_PAIRS = 4     # pairs of a batch whose input gradient is penalised (CPU cost)
-GP_FRAMES = 16   # frames, the last ones of each window, that the penalty differentiates through
-
-
-def gradient_penalty(model: DistanceModel, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Squared L2 norm of the gradient of a pair's summed per-step distance (frame term, plus the
-    sequence term when the model has one: the distance the reward uses) with respect to the
-    frames of both windows, mean over :data:`GP_PAIRS` pairs; a, b [T, B, H, W] in [0, 1].
-    A smooth distance ranks near behaviours by how near they are (AMP's gradient penalty)."""
-    a = a[-GP_FRAMES:, :GP_PAIRS].detach().clone().requires_grad_(True)
-    b = b[-GP_FRAMES:, :GP_PAIRS].detach().clone().requires_grad_(True)
-    n = a.shape[1]
-    mu, _ = model.encode_frames(torch.cat([a, b], dim=1))             # [T, 2n, D]
-    d = ((mu[:, :n] - mu[:, n:]).pow(2).sum(-1) + 1e-8).sqrt()
-    if model.omega is not None:
-        h, _ = model.encode_sequence(mu)
-        d = d + ((h[:, :n] - h[:, n:]).pow(2).sum(-1) + 1e-8).sqrt()
-    ga, gb = torch.autograd.grad(d.sum(), [a, b], create_graph=True)
-    return (ga.pow(2).sum(dim=(0, 2, 3)) + gb.pow(2).sum(dim=(0, 2, 3))).mean()
-
-
 def total_loss(model: DistanceModel, a: torch.Tensor, b: torch.Tensor, y: torch.Tensor
                ) -> tuple[torch.Tensor, dict[str, float]]:
     """Weighted VIRL loss of a batch of pairs; a, b [T, B, H, W] in [0, 1], y [B] in {0, 1}.
@@ -146,21 +125,18 @@ def total_loss(model: DistanceModel, a: torch.Tensor, b: torch.Tensor, y: torch.
     mu = mu_u[inverse].reshape(*frames.shape[:2], -1)      # [T, 2B, D]
     parts: dict[str, torch.Tensor] = {}
     weights: dict[str, float] = {}
-    parts["sni"] = sni_loss(mu[:, :n], mu[:, n:], y, cfg.margin)
-    weights["sni"] = cfg.w_sni if cfg.uses_lstm else cfg.w_sns + cfg.w_sni
+    parts["sni"] = sni_loss(mu[:, :n], mu[:, n:], y, cfg.loss.margin)
+    weights["sni"] = cfg.loss.w_sni if cfg.uses_lstm else cfg.loss.w_sns + cfg.loss.w_sni
     if cfg.uses_lstm:
         h, _ = model.encode_sequence(mu)
-        parts["sns"] = sns_loss(h[-1, :n], h[-1, n:], y, cfg.margin)
-        weights["sns"] = cfg.w_sns
+        parts["sns"] = sns_loss(h[-1, :n], h[-1, n:], y, cfg.loss.margin)
+        weights["sns"] = cfg.loss.w_sns
         if cfg.uses_decoders:
-            parts["raes"] = raes_loss(model, h[-1], frames, cfg.ae_frames)
-            weights["raes"] = cfg.w_raes
+            parts["raes"] = raes_loss(model, h[-1], frames, cfg.loss.ae_frames)
+            weights["raes"] = cfg.loss.w_raes
     if cfg.uses_decoders:
-        parts["vaei"] = vaei_loss(model, mu_u, logvar_u, uniq, cfg.vae_beta, cfg.ae_frames)
-        weights["vaei"] = cfg.w_vaei
-    if cfg.w_gp > 0:
-        parts["gp"] = gradient_penalty(model, a, b)
-        weights["gp"] = cfg.w_gp
+        parts["vaei"] = vaei_loss(model, mu_u, logvar_u, uniq, cfg.loss.vae_beta, cfg.loss.ae_frames)
+        weights["vaei"] = cfg.loss.w_vaei
     loss = sum(weights[k] * parts[k] for k in parts)
     logs = {k: float(v.detach()) for k, v in parts.items()}
     logs["total"] = float(loss.detach())

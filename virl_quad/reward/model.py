@@ -23,16 +23,16 @@ class FrameEncoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.size = cfg.image_size
-        self.conv1 = nn.Conv2d(1, cfg.conv1_filters, cfg.conv1_kernel, cfg.conv1_stride)
-        self.drop = nn.Dropout2d(cfg.dropout)  # whole feature maps: far cheaper on CPU than per-unit
-        self.conv2 = nn.Conv2d(cfg.conv1_filters, cfg.conv2_filters, cfg.conv2_kernel, cfg.conv2_stride)
-        n1 = conv_out(cfg.image_size, cfg.conv1_kernel, cfg.conv1_stride)
-        n2 = conv_out(n1, cfg.conv2_kernel, cfg.conv2_stride)
-        self.grid = (cfg.conv2_filters, n2, n2)
-        self.fc = nn.Linear(cfg.conv2_filters * n2 * n2, cfg.dense_units)
-        self.mu = nn.Linear(cfg.dense_units, cfg.frame_latent)
-        self.logvar = nn.Linear(cfg.dense_units, cfg.frame_latent)
+        self.size = cfg.arch.image_size
+        self.conv1 = nn.Conv2d(1, cfg.arch.conv1_filters, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
+        self.drop = nn.Dropout2d(cfg.arch.dropout)  # whole feature maps: far cheaper on CPU than per-unit
+        self.conv2 = nn.Conv2d(cfg.arch.conv1_filters, cfg.arch.conv2_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
+        n1 = conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
+        n2 = conv_out(n1, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
+        self.grid = (cfg.arch.conv2_filters, n2, n2)
+        self.fc = nn.Linear(cfg.arch.conv2_filters * n2 * n2, cfg.arch.dense_units)
+        self.mu = nn.Linear(cfg.arch.dense_units, cfg.arch.frame_latent)
+        self.logvar = nn.Linear(cfg.arch.dense_units, cfg.arch.frame_latent)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Frames [..., H, W] in [0, 1] -> (mu, logvar), each [..., frame_latent]; mu in (0, 1)."""
@@ -74,16 +74,16 @@ class FrameDecoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig, grid: tuple[int, int, int]) -> None:
         super().__init__()
-        self.size, self.grid = cfg.image_size, grid
+        self.size, self.grid = cfg.arch.image_size, grid
         c2, n2, _ = grid
-        self.fc1 = nn.Linear(cfg.frame_latent, cfg.dense_units)
-        self.fc2 = nn.Linear(cfg.dense_units, c2 * n2 * n2)
-        n1 = conv_out(cfg.image_size, cfg.conv1_kernel, cfg.conv1_stride)
-        pad2 = n1 - ((n2 - 1) * cfg.conv2_stride + cfg.conv2_kernel)
-        pad1 = cfg.image_size - ((n1 - 1) * cfg.conv1_stride + cfg.conv1_kernel)
-        self.deconv2 = ConvTranspose2d(c2, cfg.conv1_filters, cfg.conv2_kernel, cfg.conv2_stride,
+        self.fc1 = nn.Linear(cfg.arch.frame_latent, cfg.arch.dense_units)
+        self.fc2 = nn.Linear(cfg.arch.dense_units, c2 * n2 * n2)
+        n1 = conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
+        pad2 = n1 - ((n2 - 1) * cfg.arch.conv2_stride + cfg.arch.conv2_kernel)
+        pad1 = cfg.arch.image_size - ((n1 - 1) * cfg.arch.conv1_stride + cfg.arch.conv1_kernel)
+        self.deconv2 = ConvTranspose2d(c2, cfg.arch.conv1_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride,
                                           output_padding=pad2)
-        self.deconv1 = ConvTranspose2d(cfg.conv1_filters, 1, cfg.conv1_kernel, cfg.conv1_stride,
+        self.deconv1 = ConvTranspose2d(cfg.arch.conv1_filters, 1, cfg.arch.conv1_kernel, cfg.arch.conv1_stride,
                                           output_padding=pad1)
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
@@ -101,8 +101,8 @@ class SequenceEncoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.lstm = nn.LSTM(cfg.frame_latent, cfg.lstm_units)
-        self.head = nn.Linear(cfg.lstm_units, cfg.seq_latent)
+        self.lstm = nn.LSTM(cfg.arch.frame_latent, cfg.arch.lstm_units)
+        self.head = nn.Linear(cfg.arch.lstm_units, cfg.arch.seq_latent)
 
     def forward(self, e: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
@@ -119,8 +119,8 @@ class SequenceDecoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.lstm = nn.LSTM(cfg.seq_latent, cfg.decoder_lstm_units)
-        self.head = nn.Linear(cfg.decoder_lstm_units, cfg.frame_latent)
+        self.lstm = nn.LSTM(cfg.arch.seq_latent, cfg.arch.decoder_lstm_units)
+        self.head = nn.Linear(cfg.arch.decoder_lstm_units, cfg.arch.frame_latent)
 
     def forward(self, h: torch.Tensor, length: int) -> torch.Tensor:
         """h [B, seq_latent] -> reversed latent frames [length, B, frame_latent] in (0, 1)."""

@@ -32,7 +32,7 @@ class VirlReward(RewardModel):
         return DistanceModel(self.cfg)
 
     def _lstm_units(self) -> int:
-        return self.cfg.lstm_units if self.cfg.uses_lstm else 0
+        return self.cfg.arch.lstm_units if self.cfg.uses_lstm else 0
 
     def _loss(self, rng: np.random.Generator) -> tuple[torch.Tensor, dict[str, float]]:
         batch = self.sampler.draw(rng)

@@ -36,12 +36,12 @@ class PairSampler:
                  dataset: EpisodeStore) -> None:
         self.cfg, self.demo, self.clips, self.dataset = cfg, demo, list(clips), dataset
         self._seqs: list[tuple[np.ndarray, np.ndarray]] = []
-        off = cfg.same_source_max_offset
+        off = cfg.pairs.same_source_max_offset
         shortest = min(c.shape[0] for c in [demo] + self.clips)
-        if not cfg.clips_cyclic and shortest < cfg.window_min + 1 + 2 * off:
-            raise ValueError(f"clips need >= {cfg.window_min + 1 + 2 * off} frames "
+        if not cfg.pairs.clips_cyclic and shortest < cfg.pairs.window_min + 1 + 2 * off:
+            raise ValueError(f"clips need >= {cfg.pairs.window_min + 1 + 2 * off} frames "
                              f"(window_min + 1 + 2 * same_source_max_offset) unless clips_cyclic; got {shortest}")
-        self.clip_cap = 10**9 if cfg.clips_cyclic else shortest - 1 - 2 * off
+        self.clip_cap = 10**9 if cfg.pairs.clips_cyclic else shortest - 1 - 2 * off
 
     # -- material -----------------------------------------------------------------------------
     def _expert_clip(self, rng: np.random.Generator) -> np.ndarray:
@@ -50,7 +50,7 @@ class PairSampler:
         return self.demo
 
     def _warped(self, rng: np.random.Generator, clip: np.ndarray, need: int) -> np.ndarray:
-        c = self.cfg
+        c = self.cfg.pairs
         return augment.warped_window(rng, clip, need, c.warp_min, c.warp_max, c.clips_cyclic)[0]
 
     def _agent_window(self, rng: np.random.Generator, eligible: np.ndarray, need: int
@@ -61,14 +61,14 @@ class PairSampler:
 
     def _anchor(self, rng: np.random.Generator, eligible: np.ndarray, need: int) -> np.ndarray:
         """One window of ``need`` frames: an agent window (EESP) or an expert-material window (warped)."""
-        if eligible.size and rng.random() < self.cfg.agent_source_prob:
+        if eligible.size and rng.random() < self.cfg.pairs.agent_source_prob:
             agent, _, i = self._agent_window(rng, eligible, need)
             return agent[i:i + need].astype(np.float32) * _SCALE
         return self._warped(rng, self._expert_clip(rng), need)
 
     def _same_source(self, rng: np.random.Generator, eligible: np.ndarray, L: int) -> pairs.Pair:
-        off = self.cfg.same_source_max_offset
-        if eligible.size and rng.random() < self.cfg.agent_source_prob:
+        off = self.cfg.pairs.same_source_max_offset
+        if eligible.size and rng.random() < self.cfg.pairs.agent_source_prob:
             agent, _, i = self._agent_window(rng, eligible, L)
             lo, hi = max(0, i - off), min(agent.shape[0] - L, i + off)
             j = int(rng.integers(lo, hi + 1))
@@ -83,13 +83,13 @@ class PairSampler:
     # -- batch --------------------------------------------------------------------------------
     def window_length(self, rng: np.random.Generator) -> int:
         """Draw this batch's window length L (EESP, capped by the clips when they do not loop)."""
-        c = self.cfg
+        c = self.cfg.pairs
         l_max = augment.eesp_max_length(self.dataset.mean_episode_length, c.window_min, c.window_max)
         return augment.eesp_length(rng, c.window_min, min(l_max, self.clip_cap))
 
     def available(self, L: int, have_agent: bool) -> tuple[list[str], list[str]]:
         """Names of the positive and negative constructors usable for windows of L frames."""
-        w = self.cfg.pair_weights
+        w = self.cfg.pairs.pair_weights
         pos = [n for n in POSITIVE_PAIRS if w.get(n, 1.0) > 0]
         neg = [n for n in NEGATIVE_PAIRS if w.get(n, 1.0) > 0
                and not (n == "expert_vs_agent" and not have_agent)
@@ -100,13 +100,13 @@ class PairSampler:
         return pos, neg
 
     def _pick(self, rng: np.random.Generator, names: list[str]) -> str:
-        w = np.array([self.cfg.pair_weights.get(n, 1.0) for n in names], dtype=np.float64)
+        w = np.array([self.cfg.pairs.pair_weights.get(n, 1.0) for n in names], dtype=np.float64)
         return names[int(rng.choice(len(names), p=w / w.sum()))]
 
     def make_pair(self, rng: np.random.Generator, name: str, L: int, eligible: np.ndarray) -> pairs.Pair:
         """Build one pair of L-frame sequences with the named constructor."""
         if name == "gaussian_noise":
-            return pairs.gaussian_noise(self._anchor(rng, eligible, L + 1), rng, self.cfg.noise_sigma)
+            return pairs.gaussian_noise(self._anchor(rng, eligible, L + 1), rng, self.cfg.pairs.noise_sigma)
         if name in pairs.SINGLE:
             return pairs.SINGLE[name](self._anchor(rng, eligible, L + 1), rng)
         if name == "same_source":
@@ -121,8 +121,8 @@ class PairSampler:
         raise ValueError(f"unknown pair constructor {name!r}")
 
     def draw(self, rng: np.random.Generator, batch_pairs: int | None = None) -> Batch:
-        """Draw a batch: ``batch_pairs`` pairs (default cfg.batch_pairs), the first half positive."""
-        B = batch_pairs or self.cfg.batch_pairs
+        """Draw a batch: ``batch_pairs`` pairs (default cfg.pairs.batch_pairs), the first half positive."""
+        B = batch_pairs or self.cfg.pairs.batch_pairs
         L = self.window_length(rng)
         self._seqs = self.dataset.sequences()       # finished and open agent episodes
         lengths = np.array([a.shape[0] for a, _ in self._seqs], dtype=np.int64)

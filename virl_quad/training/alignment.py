@@ -105,7 +105,7 @@ def rollout_rewards(model, rollouts: list[GradedRollout]) -> list[float]:
         for r in rollouts:
             d = model.distance(torch.from_numpy(r.expert[:, None]), torch.from_numpy(r.agent[:, None]))[:, 0]
             d = d[SKIP:] if len(d) > SKIP else d
-            rewards.append(float(torch.exp(model.cfg.w_d * d ** 2).mean()))
+            rewards.append(float(torch.exp(model.cfg.reward.w_d * d ** 2).mean()))
     return rewards
 
 

@@ -41,11 +41,9 @@ class LearnedReward:
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
-                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 w_gp: float = 0.0) -> None:
+                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
-        cfg = RewardConfig(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights,
-                           w_gp=w_gp)
+        cfg = RewardConfig.make(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.updates = updates
         self.num_envs = num_envs
