@@ -172,6 +172,16 @@ def replace_options(obj: Any, **values: Any) -> Any:
     return from_options(type(obj), {**options(obj), **values})
 
 
+class Sectioned:
+    """Base of a dataclass whose fields are options and sections of options (flat names)."""
+
+    @classmethod
+    def make(cls, **values: Any) -> Any:
+        """An instance with the named options (flat names, ``make(num_envs=4)``) changed from the
+        defaults; TypeError for an unknown name."""
+        return replace_options(cls(), **values)
+
+
 def run_main(main: Callable[[], int | None]) -> None:
     """Run ``main``; bad input becomes ``error: ...`` on stderr and exit code 2; Ctrl-C exits 130."""
     try:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
-from virl_quad.cli import replace_options
+from virl_quad.cli import Sectioned
 
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
@@ -91,7 +91,7 @@ class CameraConfig:
 
 
 @dataclass
-class EnvConfig:
+class EnvConfig(Sectioned):
     """Options of :class:`QuadrupedEnv`, by concern; ``virl_quad.envs.make`` and
     :meth:`make` take them by their flat names (``action_scale=0.3``)."""
 
@@ -101,12 +101,6 @@ class EnvConfig:
     action: ActionConfig = field(default_factory=ActionConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
-
-    @classmethod
-    def make(cls, **values: object) -> EnvConfig:
-        """A config with the named options (flat names) changed from the defaults; TypeError for
-        an unknown name."""
-        return replace_options(cls(), **values)
 
 
 def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:

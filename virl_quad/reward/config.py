@@ -10,7 +10,7 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any
 
-from virl_quad.cli import from_options, options, replace_options
+from virl_quad.cli import Sectioned, from_options, options
 
 VARIANTS: tuple[str, ...] = ("virl", "frame", "sequence", "no_ae", "gaifo")
 
@@ -117,7 +117,7 @@ class StoreConfig:
 
 
 @dataclass
-class RewardConfig:
+class RewardConfig(Sectioned):
     """Everything that shapes the distance model, its training and the reward.
 
     ``variant`` picks the method or a baseline/ablation:
@@ -197,12 +197,6 @@ class RewardConfig:
         if unknown:
             raise ValueError(f"unknown RewardConfig fields: {sorted(unknown)}")
         return from_options(cls, d).validate()
-
-    @classmethod
-    def make(cls, **values: Any) -> "RewardConfig":
-        """A config with the named settings (flat names, e.g. ``RewardConfig.make(variant="frame",
-        lr=3e-4)``) changed from the defaults; TypeError for an unknown name."""
-        return replace_options(cls(), **values)
 
 
 def without_retired(d: dict[str, Any]) -> dict[str, Any]:

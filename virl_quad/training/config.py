@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from virl_quad.cli import from_options, opt, options, replace_options
+from virl_quad.cli import Sectioned, from_options, opt, options
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 
 REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
@@ -136,7 +136,7 @@ class EvalOptions:
 
 
 @dataclass
-class TrainArgs:
+class TrainArgs(Sectioned):
     """Options of ``python -m virl_quad.train``, one section per concern (flat option names)."""
 
     run: RunOptions = field(default_factory=RunOptions)
@@ -145,11 +145,6 @@ class TrainArgs:
     distance: DistanceOptions = field(default_factory=DistanceOptions)
     ppo: PPOOptions = field(default_factory=PPOOptions)
     eval: EvalOptions = field(default_factory=EvalOptions)
-
-    @classmethod
-    def make(cls, **values: object) -> TrainArgs:
-        """Options by their command-line names (``TrainArgs.make(robot="laikago", num_envs=4)``)."""
-        return replace_options(cls(), **values)
 
 
 def validate(args: TrainArgs) -> None:

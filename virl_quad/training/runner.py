@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 import torch
 from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
 from virl_quad.envs.workers import EnvWorkerLost
@@ -147,6 +148,8 @@ class VirlRunner(OnPolicyRunner):
             for _ in range(self.cfg["num_steps_per_env"]):
                 actions = self.alg.act(obs)
                 obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
+                if self.cfg.get("check_for_nan", True):
+                    check_nan(obs, rewards, dones)          # rsl-rl's check: ValueError naming the group
                 obs, rewards, dones = obs.to(self.device), rewards.to(self.device), dones.to(self.device)
                 self.alg.process_env_step(obs, rewards, dones, extras)
                 self._episode_len += 1
