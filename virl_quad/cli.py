@@ -135,6 +135,13 @@ def _add(group: Any, f: dataclasses.Field, hint: Any) -> None:
                            dest=f.name, help=_help(f))
 
 
+def parse(cls: type, argv: list[str] | None, description: str, prog: str) -> Any:
+    """``cls`` from the command line ``argv`` (None: ``sys.argv[1:]``) through
+    :func:`parser_from_dataclass`: one ``error:`` line and exit 2 for bad input."""
+    parser = parser_from_dataclass(cls, description=description, prog=prog)
+    return dataclass_from_args(cls, parser.parse_args(sys.argv[1:] if argv is None else argv))
+
+
 def from_options(cls: type, values: dict[str, Any]) -> Any:
     """``cls`` (sections included) from a flat ``{option name: value}`` dict; options it does not
     name keep their defaults, names ``cls`` does not know are ignored (settings saved by an older

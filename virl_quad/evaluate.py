@@ -10,13 +10,12 @@ same figures for holding the default pose (the baseline the policy must beat).
 from __future__ import annotations
 
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.policy_io import LoadedPolicy, load_policy
 
 
@@ -51,9 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     from virl_quad import demo as demo_lib
     from virl_quad.evaluation.rollout import evaluate
 
-    parser = parser_from_dataclass(EvaluateArgs, description=__doc__.split("\n\n")[0],
-                                   prog="python -m virl_quad.evaluate")
-    args = dataclass_from_args(EvaluateArgs, parser.parse_args(sys.argv[1:] if argv is None else argv))
+    args = parse(EvaluateArgs, argv, __doc__.split("\n\n")[0], "python -m virl_quad.evaluate")
     if args.episodes < 1 or args.seconds <= 0:
         raise UserError("--episodes must be >= 1 and --seconds > 0")
     policy = load_policy(args.policy)

@@ -9,7 +9,6 @@ Writes ``NAME.pt`` (observation normaliser baked in, deterministic mean action),
 from __future__ import annotations
 
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +17,7 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from virl_quad import robots
-from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy_io import metadata_for, save_policy
 from virl_quad.training import checkpoint
@@ -117,8 +116,7 @@ class ExportArgs:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
-    parser = parser_from_dataclass(ExportArgs, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.export")
-    args = dataclass_from_args(ExportArgs, parser.parse_args(sys.argv[1:] if argv is None else argv))
+    args = parse(ExportArgs, argv, __doc__.split("\n\n")[0], "python -m virl_quad.export")
     path = export(args.run_dir, args.out, args.onnx)
     print(f"exported {path} and {path.with_suffix('.json')}")
     return 0

@@ -42,3 +42,14 @@ def test_clip_to_limits_is_np_clip(name: str) -> None:
     got = spec.clip_to_limits(q)
     np.testing.assert_array_equal(got, np.clip(q, spec.joint_lower, spec.joint_upper))   # NaN stays NaN
     assert got.shape == q.shape
+
+
+def test_a_spec_object_is_its_own_lookup() -> None:
+    """Functions that take a robot take its name or the spec itself (a variant the registry
+    does not hold is not looked up again by name)."""
+    import dataclasses
+
+    variant = dataclasses.replace(robots.get("pupper"), name="pupper-heavier")
+    assert robots.get(variant) is variant
+    with pytest.raises(ValueError, match="unknown robot 'pupper-heavier'"):
+        robots.get("pupper-heavier")

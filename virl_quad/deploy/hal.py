@@ -25,7 +25,6 @@ still meets the watchdog (DAMPING after more than 3 control periods without a co
 from __future__ import annotations
 
 import struct
-import sys
 import threading
 import time
 from collections import Counter
@@ -36,7 +35,7 @@ import numpy as np
 import zenoh
 
 from virl_quad import robots
-from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._record import Recorder
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
@@ -374,8 +373,7 @@ def main(config: HalConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> HalConfig:
     """Parse the command line into a :class:`HalConfig` (its fields are the options)."""
-    p = parser_from_dataclass(HalConfig, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.deploy.hal")
-    return dataclass_from_args(HalConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
+    return parse(HalConfig, argv, __doc__.split("\n\n")[0], "python -m virl_quad.deploy.hal")
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from typing import Any, Callable
 
 import zenoh
 
-from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import StopFlag, open_config, open_session
 from virl_quad.deploy.protocol import MsgType, ProtocolError
@@ -234,9 +234,7 @@ def main(config: OperatorConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> OperatorConfig:
     """Parse the command line into an :class:`OperatorConfig` (its fields are the options)."""
-    p = parser_from_dataclass(OperatorConfig, description=__doc__.split("\n\n")[0],
-                              prog="python -m virl_quad.deploy.operator")
-    return dataclass_from_args(OperatorConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
+    return parse(OperatorConfig, argv, __doc__.split("\n\n")[0], "python -m virl_quad.deploy.operator")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import gc
 import math
-import sys
 import threading
 import time
 from collections import Counter
@@ -41,7 +40,7 @@ import numpy as np
 import torch
 import zenoh
 
-from virl_quad.cli import UserError, dataclass_from_args, opt, parser_from_dataclass, run_main
+from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.deploy import protocol as P
 from virl_quad.deploy._zenoh_io import Log, SeqPublisher, StopFlag, open_config, open_session, undeclare_all
 from virl_quad.deploy.protocol import MsgType, ProtocolError
@@ -358,8 +357,7 @@ def main(config: ServeConfig) -> int:
 
 def config_from_args(argv: list[str] | None = None) -> ServeConfig:
     """Parse the command line into a :class:`ServeConfig` (its fields are the options)."""
-    p = parser_from_dataclass(ServeConfig, description=__doc__.split("\n\n")[0], prog="python -m virl_quad.deploy.serve")
-    return dataclass_from_args(ServeConfig, p.parse_args(sys.argv[1:] if argv is None else argv))
+    return parse(ServeConfig, argv, __doc__.split("\n\n")[0], "python -m virl_quad.deploy.serve")
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ def make(robot: str | RobotSpec, *, env: str = "quadruped", render_mode: str | N
 
     Raises ValueError with the valid choices for an unknown robot, env or option.
     """
-    spec = robot if isinstance(robot, RobotSpec) else robots.get(robot)
+    spec = robots.get(robot)
     if env not in ENVS:
         raise ValueError(f"unknown env {env!r}; choose one of: {', '.join(ENVS)}")
     return ENVS[env](spec, options_of(overrides), render_mode=render_mode)

@@ -51,7 +51,7 @@ class QuadrupedVecEnv(VecEnv):
                  ray_address: str | None = None, actor_prefix: str = "", **overrides: Any) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        robot = robots.get(robot) if isinstance(robot, str) else robot
+        robot = robots.get(robot)
         #: the policy contract of these envs (action size, scale, clip, rate limit, TG, clock);
         #: every option is checked here, in this process, with a clear error
         spec, self.contract = checked(robot, options_of(overrides))

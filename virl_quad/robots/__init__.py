@@ -21,8 +21,12 @@ def names() -> tuple[str, ...]:
     return tuple(REGISTRY)
 
 
-def get(name: str) -> RobotSpec:
-    """Return the spec of robot ``name``; raise ValueError naming the valid choices."""
+def get(name: str | RobotSpec) -> RobotSpec:
+    """Return the spec of robot ``name``; raise ValueError naming the valid choices. A
+    :class:`RobotSpec` is returned as it is, so every function taking a robot takes either a
+    name (command lines, files) or the spec object itself (a variant the registry does not hold)."""
+    if isinstance(name, RobotSpec):
+        return name
     try:
         return REGISTRY[name]
     except (KeyError, TypeError):
