@@ -7,8 +7,10 @@
   dataclass (cleanrl's pattern: the dataclass is the CLI and its documentation); a field that
   is itself such a dataclass is a section (one concern) whose options form a group in the help.
   Option names are flat and unique across sections (``--reward-lr``, not ``--distance.reward-lr``).
+  :func:`parse` builds the dataclass from a command line with it.
 - :func:`options`, :func:`from_options`, :func:`replace_options`: the same options as one flat
-  ``{name: value}`` dict (how a run's configuration is saved), and back.
+  ``{name: value}`` dict (how a run's configuration is saved), and back; :class:`Sectioned`
+  gives such a dataclass ``make(**flat_names)``.
 - :func:`run_main`: run a ``main`` and turn expected failures (bad input) into one
   line on stderr and exit code 2, never a traceback.
 """
