@@ -26,6 +26,8 @@ BAD = [
     ("virl_quad.demo", ["dance"], "invalid choice"),
     ("virl_quad.demo", ["render", "--robot", "dog", "--out", "x.npz"], "dog"),
     ("virl_quad.demo", ["show", "missing.npz", "--out", "x.png"], "missing.npz"),
+    ("virl_quad.demo", ["render", "--robot", "pupper", "--gait", "trot", "--motion", "x.txt", "--out", "y.npz"],
+     "not allowed with"),
     ("virl_quad.compare", ["--rewards", "virl,foo"], "unknown reward 'foo'"),
     ("virl_quad.compare", ["--minutes", "0"], "--minutes"),
     ("virl_quad.compare", ["--confusion", "trot"], "two or more"),

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import types
 import typing
 from collections.abc import Sequence
 from typing import Any, Callable
@@ -52,21 +53,25 @@ class Parser(argparse.ArgumentParser):
 
 
 def opt(default: Any, help: str, choices: Sequence[str] | None = None, positional: bool = False,
-        required: bool = False) -> Any:
+        required: bool = False, nargs: str | None = None) -> Any:
     """A dataclass field with default ``default`` whose ``--option`` shows ``help`` (and accepts
     only ``choices``, when given); ``positional``: a positional argument instead; ``required``:
-    the command line must give it (the default then only serves code that builds the dataclass).
+    the command line must give it (the default then only serves code that builds the dataclass);
+    ``nargs="+"``: a list option takes its items after one flag (else the flag repeats).
     Only fields made with :func:`opt` appear on the command line."""
-    meta: dict[str, Any] = {"help": help, "positional": positional, "required": required}
+    meta: dict[str, Any] = {"help": help, "positional": positional, "required": required, "nargs": nargs}
     if choices is not None:
         meta["choices"] = tuple(choices)
+    if isinstance(default, list):                 # a mutable default: each instance its own copy
+        return dataclasses.field(default_factory=lambda: list(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
 
 
 def _arg_type(tp: Any) -> tuple[Callable | None, bool]:
     """(argparse converter, repeatable) of a field annotation: converter None for a bool (a
     --flag/--no-flag switch); a list is a repeatable option of its items."""
-    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    union = typing.get_origin(tp) in (typing.Union, types.UnionType)
+    args = [a for a in typing.get_args(tp) if a is not type(None)] if union else []
     base = args[0] if len(args) == 1 else tp  # "X | None" -> X
     if typing.get_origin(base) is list:
         item = (typing.get_args(base) or (str,))[0]
@@ -101,6 +106,13 @@ def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> ar
     """A :class:`Parser` with one ``--kebab-case`` option per field of dataclass ``cls`` (and of
     its sections, each an argument group titled by the section's docstring)."""
     parser = Parser(description=description, **kwargs)
+    add_options(parser, cls)
+    return parser
+
+
+def add_options(parser: argparse.ArgumentParser, cls: type) -> None:
+    """Add the options of dataclass ``cls`` (see :func:`parser_from_dataclass`) to ``parser``
+    (e.g. a subcommand's parser)."""
     seen: set[str] = set()
     for section, sub, flds in _sections(cls):
         doc = (sub.__doc__ or "").strip().splitlines()[0] if section else ""
@@ -113,7 +125,6 @@ def parser_from_dataclass(cls: type, description: str = "", **kwargs: Any) -> ar
                 raise TypeError(f"option --{f.name.replace('_', '-')} is defined twice in {cls.__name__}")
             seen.add(f.name)
             _add(group, f, hints[f.name])
-    return parser
 
 
 def _add(group: Any, f: dataclasses.Field, hint: Any) -> None:
@@ -129,6 +140,9 @@ def _add(group: Any, f: dataclasses.Field, hint: Any) -> None:
     elif conv is None:  # bool: --flag, and --no-flag when it is on by default
         group.add_argument("--" + f.name.replace("_", "-"), default=default, help=_help(f),
                            action=argparse.BooleanOptionalAction if default else "store_true")
+    elif repeat and f.metadata.get("nargs"):
+        group.add_argument("--" + f.name.replace("_", "-"), type=conv, nargs=f.metadata["nargs"], default=default,
+                           dest=f.name, help=_help(f))
     elif repeat:
         group.add_argument("--" + f.name.replace("_", "-"), type=conv, action="append", default=None,
                            dest=f.name, help=_help(f) + " (repeatable)")

@@ -17,12 +17,15 @@ from __future__ import annotations
 import argparse
 import sys
 import typing
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from virl_quad import robots
-from virl_quad.cli import Parser
+from virl_quad.cli import Parser, add_options, from_options, opt
+from virl_quad.demo.render import PREVIEW_SIZE, PREVIEWS
+from virl_quad.motion.gaits import GAIT_NAMES
 
 EXIT_USAGE = 2
 
@@ -43,11 +46,13 @@ def _describe(d) -> str:
     return f"{d.num_frames} frames, {d.fps:.2f} fps, {d.duration:.2f} s, robot {d.robot or '?'}, {motion}"
 
 
-def cmd_render(a: argparse.Namespace) -> None:
+def cmd_render(a: RenderArgs) -> None:
     """Render a built-in gait or a motion file to ``.npz`` (and optionally ``.mp4``)."""
     from virl_quad.demo import render
     from virl_quad.motion import gaits, motion_io, retarget
 
+    if a.gait and a.motion:
+        raise UsageError("argument --motion: not allowed with argument --gait")
     robots.get(a.robot)
     if a.motion:
         motion = retarget.retarget(motion_io.read_motion(a.motion), a.robot)
@@ -61,7 +66,7 @@ def cmd_render(a: argparse.Namespace) -> None:
     print(f"wrote {a.out}: {_describe(d)}" + (f"; video {a.video}" if a.video else ""))
 
 
-def cmd_import(a: argparse.Namespace) -> None:
+def cmd_import(a: ImportArgs) -> None:
     """Import a video file to ``.npz``."""
     from virl_quad.demo import render, video_import
 
@@ -70,7 +75,7 @@ def cmd_import(a: argparse.Namespace) -> None:
     print(f"wrote {a.out}: {_describe(d)}; subject followed: {d.camera.get('followed')}")
 
 
-def cmd_show(a: argparse.Namespace) -> None:
+def cmd_show(a: ShowArgs) -> None:
     """Write a contact sheet PNG of a saved demonstration."""
     from virl_quad.demo import render, sheet
 
@@ -79,7 +84,7 @@ def cmd_show(a: argparse.Namespace) -> None:
     print(f"wrote {a.out}: {_describe(d)}")
 
 
-def cmd_contacts(a: argparse.Namespace) -> None:
+def cmd_contacts(a: ContactsArgs) -> None:
     """Print the ground-contact table of every clip in a folder, on both robots."""
     from virl_quad.motion import contacts
 
@@ -89,7 +94,7 @@ def cmd_contacts(a: argparse.Namespace) -> None:
         raise SystemExit(1)
 
 
-def cmd_score(a: argparse.Namespace) -> None:
+def cmd_score(a: ScoreArgs) -> None:
     """Self-check of the score on a gait: playback (1.0), default pose, quarter-cycle shift."""
     from virl_quad.demo import render
     from virl_quad.evaluation import score
@@ -113,7 +118,7 @@ def cmd_score(a: argparse.Namespace) -> None:
         print(f"{name:22s} " + " ".join(f"{res[k]:13.4f}" for k in keys))
 
 
-def cmd_roundtrip(a: argparse.Namespace) -> None:
+def cmd_roundtrip(a: RoundtripArgs) -> None:
     """Render -> .mp4 -> import error, and ground motion of forward vs in-place demos after import."""
     from virl_quad.demo import checks
 
@@ -126,54 +131,83 @@ def cmd_roundtrip(a: argparse.Namespace) -> None:
         print(f"{name:18s} {r[name + '_ground_change']:13.3f} {r[name + '_ground_shift_px']:15.3f}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``python -m virl_quad.demo`` argument parser."""
-    from virl_quad.motion.gaits import GAIT_NAMES
-    from virl_quad.demo.render import PREVIEW_SIZE, PREVIEWS
+@dataclass
+class RenderArgs:
+    """Render a built-in gait or a motion file."""
 
+    robot: str = opt("", f"one of: {', '.join(robots.names())}", required=True)
+    gait: str | None = opt(None, f"built-in gait: {', '.join(GAIT_NAMES)} (trot when neither this nor --motion)")
+    motion: str | None = opt(None, "motion file (.txt/.json motion_imitation clip, Laikago recording); not with --gait")
+    out: str = opt("", "output .npz", required=True)
+    video: str | None = opt(None, "also write an .mp4 preview here")
+    video_size: int = opt(PREVIEW_SIZE, "preview side in px (render preview)")
+    preview: str = opt("render", "what --video shows: render, a larger RGB render to watch; frames, the 48x48 "
+                                 "frames the reward model sees, enlarged", choices=PREVIEWS)
+    seconds: float = opt(2.0, "at least this long, whole cycles (s)")
+
+
+@dataclass
+class ImportArgs:
+    """Import a video file."""
+
+    video: str = opt("", "video file (.mp4, .avi, ...)", positional=True, required=True)
+    robot: str = opt("", f"one of: {', '.join(robots.names())}", required=True)
+    out: str = opt("", "output .npz", required=True)
+    follow: str = opt("auto", "follow the moving subject", choices=("auto", "on", "off"))
+
+
+@dataclass
+class ShowArgs:
+    """Contact sheet of a saved demonstration."""
+
+    demo: str = opt("", "demonstration .npz", positional=True, required=True)
+    out: str = opt("", "output .png", required=True)
+    columns: int = opt(8, "frames per row of the sheet")
+    frames: int = opt(32, "at most this many frames, evenly spaced")
+
+
+@dataclass
+class ContactsArgs:
+    """Ground-contact table of motion clips."""
+
+    dir: str | None = opt(None, "folder of clips (unset: ../shared/motions)")
+    robots: list[str] = opt(["laikago", "pupper"], "robots to check each clip on", nargs="+")
+    strict: bool = opt(False, "exit 1 when a clip fails the criteria")
+
+
+@dataclass
+class ScoreArgs:
+    """Self-check of the ground-truth score on a gait."""
+
+    robot: str = opt("pupper", f"one of: {', '.join(robots.names())}")
+    gait: str = opt("trot", f"one of: {', '.join(GAIT_NAMES)}")
+    seconds: float = opt(4.0, "length of the scored stretch (s)")
+
+
+@dataclass
+class RoundtripArgs:
+    """Render -> .mp4 -> import error and forward-progress visibility."""
+
+    robot: str = opt("pupper", f"one of: {', '.join(robots.names())}")
+    gait: str = opt("trot", f"one of: {', '.join(GAIT_NAMES)}")
+    preview: str = opt("frames", "which video to round-trip (see render)", choices=PREVIEWS)
+    seconds: float = opt(2.0, "length of the render (s)")
+
+
+#: subcommand -> (its options, what it runs)
+COMMANDS: dict[str, tuple[type, typing.Callable]] = {
+    "render": (RenderArgs, cmd_render), "import": (ImportArgs, cmd_import), "show": (ShowArgs, cmd_show),
+    "contacts": (ContactsArgs, cmd_contacts), "score": (ScoreArgs, cmd_score), "roundtrip": (RoundtripArgs, cmd_roundtrip),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``python -m virl_quad.demo`` argument parser: one subcommand per :data:`COMMANDS` entry,
+    its options from the entry's dataclass."""
     p = _Parser(prog="python -m virl_quad.demo", description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    r = sub.add_parser("render", help="render a built-in gait or a motion file")
-    r.add_argument("--robot", required=True, help=f"one of: {', '.join(robots.names())}")
-    g = r.add_mutually_exclusive_group()
-    g.add_argument("--gait", help=f"built-in gait: {', '.join(GAIT_NAMES)} (trot when neither this nor --motion)")
-    g.add_argument("--motion", help="motion file (.txt/.json motion_imitation clip, Laikago recording)")
-    r.add_argument("--out", required=True, help="output .npz")
-    r.add_argument("--video", help="also write an .mp4 preview here")
-    r.add_argument("--video-size", type=int, default=PREVIEW_SIZE, help="preview side in px (render preview)")
-    r.add_argument("--preview", choices=PREVIEWS, default="render",
-                   help="what --video shows: render, a larger RGB render to watch; frames, the 48x48 "
-                        "frames the reward model sees, enlarged")
-    r.add_argument("--seconds", type=float, default=2.0, help="at least this long, whole cycles (s)")
-    r.set_defaults(func=cmd_render)
-    i = sub.add_parser("import", help="import a video file")
-    i.add_argument("video", help="video file (.mp4, .avi, ...)")
-    i.add_argument("--robot", required=True, help=f"one of: {', '.join(robots.names())}")
-    i.add_argument("--out", required=True, help="output .npz")
-    i.add_argument("--follow", choices=("auto", "on", "off"), default="auto", help="follow the moving subject")
-    i.set_defaults(func=cmd_import)
-    s = sub.add_parser("show", help="contact sheet of a saved demonstration")
-    s.add_argument("demo", help="demonstration .npz")
-    s.add_argument("--out", required=True, help="output .png")
-    s.add_argument("--columns", type=int, default=8, help="frames per row of the sheet")
-    s.add_argument("--frames", type=int, default=32, help="at most this many frames, evenly spaced")
-    s.set_defaults(func=cmd_show)
-    c = sub.add_parser("contacts", help="ground-contact table of motion clips")
-    c.add_argument("--dir", default=None, help="folder of clips (default ../shared/motions)")
-    c.add_argument("--robots", nargs="+", default=["laikago", "pupper"], help="robots to check each clip on")
-    c.add_argument("--strict", action="store_true", help="exit 1 when a clip fails the criteria")
-    c.set_defaults(func=cmd_contacts)
-    k = sub.add_parser("score", help="self-check of the ground-truth score on a gait")
-    k.add_argument("--robot", default="pupper", help=f"one of: {', '.join(robots.names())}")
-    k.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
-    k.add_argument("--seconds", type=float, default=4.0, help="length of the scored stretch (s)")
-    k.set_defaults(func=cmd_score)
-    t = sub.add_parser("roundtrip", help="render -> .mp4 -> import error and forward-progress visibility")
-    t.add_argument("--robot", default="pupper", help=f"one of: {', '.join(robots.names())}")
-    t.add_argument("--gait", default="trot", help=f"one of: {', '.join(GAIT_NAMES)}")
-    t.add_argument("--preview", choices=PREVIEWS, default="frames", help="which video to round-trip (see render)")
-    t.add_argument("--seconds", type=float, default=2.0, help="length of the render (s)")
-    t.set_defaults(func=cmd_roundtrip)
+    for name, (cls, _) in COMMANDS.items():
+        add_options(sub.add_parser(name, help=(cls.__doc__ or "").strip().rstrip(".").lower()), cls)
     return p
 
 
@@ -183,10 +217,12 @@ def main(argv: list[str] | None = None) -> int:
 
     import_pybullet_quietly()
     try:
-        args = build_parser().parse_args(argv)
-        if getattr(args, "video", None) and args.command == "render":
+        ns = build_parser().parse_args(argv)
+        cls, run = COMMANDS[ns.command]
+        args = from_options(cls, vars(ns))
+        if ns.command == "render" and args.video:
             Path(args.video).parent.mkdir(parents=True, exist_ok=True)
-        args.func(args)
+        run(args)
     except UsageError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
