@@ -97,7 +97,7 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
         obs, _ = env.reset(seed=int(rng.integers(2**31)), options=_episode_options(k))
         u = env.unwrapped
         x0, done = float(u.state.base_pos[0]), False
-        clip = u.cfg.action.action_clip
+        clip = u.contract.action_clip
         while not done and len(obs_out) < steps:
             q_meas = obs["policy"][q_cols] + u.robot.default_pose     # rad, as the policy measures it
             teacher = np.clip(tracker_action(env, args.gain, args.lead, motion=motion, q=q_meas), -clip, clip)

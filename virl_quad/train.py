@@ -188,10 +188,10 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
     elif args.run.reward == "prior":
         source = SurvivalReward()
     else:
-        source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, args.distance.reward_updates, args.run.seed,
-                               args.run.device, lr=args.distance.reward_lr, cyclic=demo.loop, w_d=args.distance.reward_wd,
-                               other_clips=_other_clips(args, run_dir),
-                               adversarial_weight=args.distance.adversarial_weight)
+        dist = args.distance
+        source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, dist.reward_updates, args.run.seed,
+                               args.run.device, lr=dist.reward_lr, cyclic=demo.loop, w_d=dist.reward_wd,
+                               other_clips=_other_clips(args, run_dir), adversarial_weight=dist.adversarial_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
@@ -226,8 +226,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     from virl_quad.envs.workers import EnvWorkerLost   # loaded by build with the envs
 
     log = RunLog(run_dir / "train.log")
-    log(f"virl_quad.train: robot={args.run.robot} demo={args.run.demo} reward={args.run.reward} envs={args.env.num_envs} "
-        f"run_dir={run_dir}")
+    log(f"virl_quad.train: robot={args.run.robot} demo={args.run.demo} reward={args.run.reward} "
+        f"envs={args.env.num_envs} run_dir={run_dir}")
     (run_dir / "config.json").write_text(json.dumps(to_dict(args), indent=2) + "\n")
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` checkpoints like Ctrl-C
     try:
@@ -268,7 +268,8 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
 
     t0 = time.time()
     gait = Path(str(args.run.demo)).stem.removeprefix("gait:")
-    runner.alignment_probe = AlignmentProbe(args.run.robot, demo, gait, randomize=args.env.randomize, ground=args.env.ground)
+    runner.alignment_probe = AlignmentProbe(args.run.robot, demo, gait, randomize=args.env.randomize,
+                                            ground=args.env.ground)
     first = runner.alignment_probe.probe(model)
     log(f"alignment probe: {len(runner.alignment_probe.rollouts)} graded rollouts ({time.time() - t0:.0f} s); "
         f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}")
@@ -373,7 +374,8 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     log(f"policy: {export(run_dir, run_dir / 'policy.pt')} (TorchScript with its contract; serve it with "
         f"python -m virl_quad.deploy.serve --policy {run_dir / 'policy.pt'})")
     if args.run.video:
-        out = side_by_side_video(policy, args.run.robot, demo, run_dir / "side_by_side.mp4", ground=args.env.ground, **actions)
+        out = side_by_side_video(policy, args.run.robot, demo, run_dir / "side_by_side.mp4", ground=args.env.ground,
+                                 **actions)
         log(f"video: {out}")
 
 

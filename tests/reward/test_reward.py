@@ -131,8 +131,8 @@ def test_save_load_identical_rewards_and_training(variant, tmp_path, small_cfg, 
     assert reweighted.cfg.pairs.pair_weights == {"expert_vs_agent": 0.0}
     # so may w_d: the same distances, another reward shape (exp(-1 d^2) = exp(-5 d^2) ** 0.2)
     if variant != "gaifo":
-        softer = make(variant, RewardConfig.make(**{**small_cfg.to_dict(), "w_d": small_cfg.reward.w_d / 5}), demo, other,
-                      agent_episode)
+        softer_cfg = RewardConfig.make(**{**small_cfg.to_dict(), "w_d": small_cfg.reward.w_d / 5})
+        softer = make(variant, softer_cfg, demo, other, agent_episode)
         softer.load_state_dict(torch.load(path, weights_only=True))
         torch.testing.assert_close(softer.recompute(agent, expert, dones, s),
                                    fresh.recompute(agent, expert, dones, s) ** 0.2)

@@ -197,7 +197,8 @@ class RoundtripArgs:
 #: subcommand -> (its options, what it runs)
 COMMANDS: dict[str, tuple[type, typing.Callable]] = {
     "render": (RenderArgs, cmd_render), "import": (ImportArgs, cmd_import), "show": (ShowArgs, cmd_show),
-    "contacts": (ContactsArgs, cmd_contacts), "score": (ScoreArgs, cmd_score), "roundtrip": (RoundtripArgs, cmd_roundtrip),
+    "contacts": (ContactsArgs, cmd_contacts), "score": (ScoreArgs, cmd_score),
+    "roundtrip": (RoundtripArgs, cmd_roundtrip),
 }
 
 

@@ -32,6 +32,7 @@ from virl_quad.deploy.safety import CLAMPS
 from virl_quad.deploy.zenoh_config import DEFAULT_CONNECT, load_config, publisher_options
 
 ACTIONS = ("status", "arm", "estop")
+PENDING = " (E-stop received: DAMPING from the next tick)"   # shown beside the mode
 
 
 def wait_until(pred: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
@@ -53,7 +54,7 @@ def format_status(status: dict[str, Any], state: P.RobotState | None = None) -> 
     dt = status.get("control_dt")                                  # s
     active = status.get("active_ticks")
     lines = [f"{status.get('robot_id', '?')} ({status.get('robot', '?')}, {status.get('backend', '?')} backend)  "
-             f"mode {status.get('mode', '?')}{' (E-stop received: DAMPING from the next tick)' if status.get('estop_pending') else ''}"
+             f"mode {status.get('mode', '?')}{PENDING if status.get('estop_pending') else ''}"
              f"  fault: {status.get('fault') or 'none'}"]
     motion = []
     if state is not None and state.base_pos is not None:

@@ -25,7 +25,6 @@ import gymnasium as gym
 import numpy as np
 
 from virl_quad.cli import Sectioned
-
 from virl_quad.demo.demonstration import Demonstration
 from virl_quad.envs.randomize import DRConfig, Randomization, sample
 from virl_quad.policy import observation as obs_lib
@@ -126,17 +125,17 @@ def policy_contract(spec: RobotSpec, cfg: EnvConfig, demo_frames: int | None) ->
     """The policy contract of an env for ``spec`` with ``cfg`` whose demonstration has ``demo_frames``
     frames (None: no demonstration): action scale, clip and rate limit, the TG, and the phase clock
     (the TG's, else one cycle per demonstration loop, else none)."""
-    if cfg.action.tg is not None and not isinstance(cfg.action.tg, TGParams):
-        raise ValueError(f"tg must be TGParams or None, got {type(cfg.action.tg).__name__}")
-    scale = cfg.action.action_scale if cfg.action.action_scale is not None else spec.action_scale
-    phase_hz = 1.0 / (demo_frames * spec.control_dt) if cfg.action.tg is None and demo_frames else None
-    return PolicyContract(float(scale), float(cfg.action.action_clip), cfg.action.max_target_step, spec.control_dt, cfg.action.tg,
-                          phase_hz)
+    a = cfg.action
+    if a.tg is not None and not isinstance(a.tg, TGParams):
+        raise ValueError(f"tg must be TGParams or None, got {type(a.tg).__name__}")
+    scale = a.action_scale if a.action_scale is not None else spec.action_scale
+    phase_hz = 1.0 / (demo_frames * spec.control_dt) if a.tg is None and demo_frames else None
+    return PolicyContract(float(scale), float(a.action_clip), a.max_target_step, spec.control_dt, a.tg, phase_hz)
 
 
-def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, PolicyContract]:
-    """The robot (with the config's physics step) and policy contract of an env of ``cfg``,
-    every option checked as :class:`QuadrupedEnv` would, without a simulator: ValueError (one
+def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, ActionMap]:
+    """The robot (with the config's physics step) and action map (with its policy contract) of
+    an env of ``cfg``, every option checked as :class:`QuadrupedEnv` would, without a simulator: ValueError (one
     line) for a bad physics step or PD mode, a ground the demonstration was not rendered on, a
     demonstration at another frame rate, bad randomisation ranges, a TG out of the robot's reach,
     or an oracle reward without a reference motion."""
@@ -152,8 +151,7 @@ def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, PolicyContract]
     if cfg.oracle_reward and (demo is None or demo.motion is None):
         raise ValueError("oracle_reward needs a demonstration with a reference motion")
     contract = policy_contract(spec, cfg, demo.num_frames if demo is not None else None)
-    ActionMap(spec, contract)                                   # the TG within reach and joint limits
-    return spec, contract
+    return spec, ActionMap(spec, contract)                      # ValueError: a TG out of reach or limits
 
 
 class QuadrupedEnv(gym.Env):
@@ -162,17 +160,19 @@ class QuadrupedEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
     def __init__(self, spec: RobotSpec, cfg: EnvConfig, render_mode: str | None = None) -> None:
-        spec, self.contract = checked(spec, cfg)
+        spec, self.actions = checked(spec, cfg)
+        self.contract = self.actions.contract
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
         self.world = World(spec, ground=_ground(cfg), pd=cfg.physics.pd)
-        self.dr = DRConfig.from_overrides(cfg.physics.randomization, DRConfig.for_robot(spec) if cfg.physics.randomize else DRConfig.off())
+        ph = cfg.physics
+        self.dr = DRConfig.from_overrides(ph.randomization,
+                                          DRConfig.for_robot(spec) if ph.randomize else DRConfig.off())
         self.demo = cfg.demo
         self.action_scale = cfg.action.action_scale if cfg.action.action_scale is not None else spec.action_scale
         seconds = cfg.episode.episode_seconds if cfg.episode.episode_seconds is not None else spec.episode_seconds
         self.max_steps = int(round(seconds / spec.control_dt))
-        self.actions = ActionMap(spec, self.contract)
         n_policy = self.contract.observation_size
         image = gym.spaces.Box(0, 255, (FRAME_SIZE, FRAME_SIZE), np.uint8)
         spaces = {
@@ -183,7 +183,8 @@ class QuadrupedEnv(gym.Env):
         if self.demo is not None:
             spaces["expert_image"] = image
         self.observation_space = gym.spaces.Dict(spaces)
-        self.action_space = gym.spaces.Box(-cfg.action.action_clip, cfg.action.action_clip, (self.contract.action_size,), np.float32)
+        clip = self.contract.action_clip
+        self.action_space = gym.spaces.Box(-clip, clip, (self.contract.action_size,), np.float32)
         self.rand: Randomization = sample(DRConfig.off(), np.random.default_rng(0), spec)
         self.start_yaw = 0.0                                      # rad, the base's yaw at reset
         self.steps = 0

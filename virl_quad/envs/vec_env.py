@@ -31,8 +31,8 @@ from tensordict import TensorDict
 from virl_quad import robots
 from virl_quad.envs import options_of
 from virl_quad.envs.quadruped import checked
-from virl_quad.robots.spec import RobotSpec
 from virl_quad.envs.workers import EnvWorkerLost, InProcess, Processes
+from virl_quad.robots.spec import RobotSpec
 
 __all__ = ["QuadrupedVecEnv", "EnvWorkerLost", "WORKER_KINDS"]
 
@@ -54,7 +54,8 @@ class QuadrupedVecEnv(VecEnv):
         robot = robots.get(robot)
         #: the policy contract of these envs (action size, scale, clip, rate limit, TG, clock);
         #: every option is checked here, in this process, with a clear error
-        spec, self.contract = checked(robot, options_of(overrides))
+        spec, actions = checked(robot, options_of(overrides))
+        self.contract = actions.contract
         seconds = episode_seconds if episode_seconds is not None else spec.episode_seconds
         self.num_envs = num_envs
         self.num_actions = self.contract.action_size   # 12, or 14 with a trajectory generator

@@ -151,7 +151,8 @@ class RewardConfig(Sectioned):
         if self.pairs.batch_pairs < 2 or self.pairs.batch_pairs % 2:
             raise ValueError(f"batch_pairs must be even and >= 2, got {self.pairs.batch_pairs}")
         if not 2 <= self.pairs.window_min <= self.pairs.window_max:
-            raise ValueError(f"need 2 <= window_min <= window_max, got {self.pairs.window_min}, {self.pairs.window_max}")
+            raise ValueError(f"need 2 <= window_min <= window_max, got {self.pairs.window_min}, "
+                             f"{self.pairs.window_max}")
         if not 0.0 < self.pairs.warp_min <= 1.0 <= self.pairs.warp_max:
             raise ValueError(f"need 0 < warp_min <= 1 <= warp_max, got {self.pairs.warp_min}, {self.pairs.warp_max}")
         if self.reward.w_d >= 0:

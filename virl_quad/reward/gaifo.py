@@ -29,13 +29,13 @@ class PairDiscriminator(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.conv1 = nn.Conv2d(2, cfg.arch.conv1_filters, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
-        self.drop = nn.Dropout2d(cfg.arch.dropout)  # whole feature maps: far cheaper on CPU than per-unit
-        self.conv2 = nn.Conv2d(cfg.arch.conv1_filters, cfg.arch.conv2_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
-        n2 = conv_out(conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride), cfg.arch.conv2_kernel,
-                      cfg.arch.conv2_stride)
-        self.fc = nn.Linear(cfg.arch.conv2_filters * n2 * n2, cfg.arch.dense_units)
-        self.out = nn.Linear(cfg.arch.dense_units, 1)
+        a = cfg.arch
+        self.conv1 = nn.Conv2d(2, a.conv1_filters, a.conv1_kernel, a.conv1_stride)
+        self.drop = nn.Dropout2d(a.dropout)  # whole feature maps: far cheaper on CPU than per-unit
+        self.conv2 = nn.Conv2d(a.conv1_filters, a.conv2_filters, a.conv2_kernel, a.conv2_stride)
+        n2 = conv_out(conv_out(a.image_size, a.conv1_kernel, a.conv1_stride), a.conv2_kernel, a.conv2_stride)
+        self.fc = nn.Linear(a.conv2_filters * n2 * n2, a.dense_units)
+        self.out = nn.Linear(a.dense_units, 1)
 
     def forward(self, prev: torch.Tensor, cur: torch.Tensor) -> torch.Tensor:
         """Frames [B, H, W] each (in [0, 1]) -> logits [B]."""

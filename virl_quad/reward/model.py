@@ -23,16 +23,17 @@ class FrameEncoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.size = cfg.arch.image_size
-        self.conv1 = nn.Conv2d(1, cfg.arch.conv1_filters, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
-        self.drop = nn.Dropout2d(cfg.arch.dropout)  # whole feature maps: far cheaper on CPU than per-unit
-        self.conv2 = nn.Conv2d(cfg.arch.conv1_filters, cfg.arch.conv2_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
-        n1 = conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
-        n2 = conv_out(n1, cfg.arch.conv2_kernel, cfg.arch.conv2_stride)
-        self.grid = (cfg.arch.conv2_filters, n2, n2)
-        self.fc = nn.Linear(cfg.arch.conv2_filters * n2 * n2, cfg.arch.dense_units)
-        self.mu = nn.Linear(cfg.arch.dense_units, cfg.arch.frame_latent)
-        self.logvar = nn.Linear(cfg.arch.dense_units, cfg.arch.frame_latent)
+        a = cfg.arch
+        self.size = a.image_size
+        self.conv1 = nn.Conv2d(1, a.conv1_filters, a.conv1_kernel, a.conv1_stride)
+        self.drop = nn.Dropout2d(a.dropout)  # whole feature maps: far cheaper on CPU than per-unit
+        self.conv2 = nn.Conv2d(a.conv1_filters, a.conv2_filters, a.conv2_kernel, a.conv2_stride)
+        n1 = conv_out(a.image_size, a.conv1_kernel, a.conv1_stride)
+        n2 = conv_out(n1, a.conv2_kernel, a.conv2_stride)
+        self.grid = (a.conv2_filters, n2, n2)
+        self.fc = nn.Linear(a.conv2_filters * n2 * n2, a.dense_units)
+        self.mu = nn.Linear(a.dense_units, a.frame_latent)
+        self.logvar = nn.Linear(a.dense_units, a.frame_latent)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Frames [..., H, W] in [0, 1] -> (mu, logvar), each [..., frame_latent]; mu in (0, 1)."""
@@ -74,17 +75,16 @@ class FrameDecoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig, grid: tuple[int, int, int]) -> None:
         super().__init__()
-        self.size, self.grid = cfg.arch.image_size, grid
+        a = cfg.arch
+        self.size, self.grid = a.image_size, grid
         c2, n2, _ = grid
-        self.fc1 = nn.Linear(cfg.arch.frame_latent, cfg.arch.dense_units)
-        self.fc2 = nn.Linear(cfg.arch.dense_units, c2 * n2 * n2)
-        n1 = conv_out(cfg.arch.image_size, cfg.arch.conv1_kernel, cfg.arch.conv1_stride)
-        pad2 = n1 - ((n2 - 1) * cfg.arch.conv2_stride + cfg.arch.conv2_kernel)
-        pad1 = cfg.arch.image_size - ((n1 - 1) * cfg.arch.conv1_stride + cfg.arch.conv1_kernel)
-        self.deconv2 = ConvTranspose2d(c2, cfg.arch.conv1_filters, cfg.arch.conv2_kernel, cfg.arch.conv2_stride,
-                                          output_padding=pad2)
-        self.deconv1 = ConvTranspose2d(cfg.arch.conv1_filters, 1, cfg.arch.conv1_kernel, cfg.arch.conv1_stride,
-                                          output_padding=pad1)
+        self.fc1 = nn.Linear(a.frame_latent, a.dense_units)
+        self.fc2 = nn.Linear(a.dense_units, c2 * n2 * n2)
+        n1 = conv_out(a.image_size, a.conv1_kernel, a.conv1_stride)
+        pad2 = n1 - ((n2 - 1) * a.conv2_stride + a.conv2_kernel)
+        pad1 = a.image_size - ((n1 - 1) * a.conv1_stride + a.conv1_kernel)
+        self.deconv2 = ConvTranspose2d(c2, a.conv1_filters, a.conv2_kernel, a.conv2_stride, output_padding=pad2)
+        self.deconv1 = ConvTranspose2d(a.conv1_filters, 1, a.conv1_kernel, a.conv1_stride, output_padding=pad1)
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """Latent [..., frame_latent] -> frames [..., H, W] in (0, 1)."""
@@ -101,8 +101,9 @@ class SequenceEncoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.lstm = nn.LSTM(cfg.arch.frame_latent, cfg.arch.lstm_units)
-        self.head = nn.Linear(cfg.arch.lstm_units, cfg.arch.seq_latent)
+        a = cfg.arch
+        self.lstm = nn.LSTM(a.frame_latent, a.lstm_units)
+        self.head = nn.Linear(a.lstm_units, a.seq_latent)
 
     def forward(self, e: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
@@ -119,8 +120,9 @@ class SequenceDecoder(nn.Module):
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
-        self.lstm = nn.LSTM(cfg.arch.seq_latent, cfg.arch.decoder_lstm_units)
-        self.head = nn.Linear(cfg.arch.decoder_lstm_units, cfg.arch.frame_latent)
+        a = cfg.arch
+        self.lstm = nn.LSTM(a.seq_latent, a.decoder_lstm_units)
+        self.head = nn.Linear(a.decoder_lstm_units, a.frame_latent)
 
     def forward(self, h: torch.Tensor, length: int) -> torch.Tensor:
         """h [B, seq_latent] -> reversed latent frames [length, B, frame_latent] in (0, 1)."""
