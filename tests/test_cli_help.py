@@ -33,3 +33,17 @@ def test_train_help_lists_every_option_with_its_meaning_by_concern() -> None:
         title = out.index(f"\n{section.name} (")
         first = dataclasses.fields(getattr(TrainArgs(), section.name))[0].name.replace("_", "-")
         assert out.index(f"--{first}", title) > title, section.name
+
+
+def test_a_section_is_declared_by_its_type_and_each_instance_owns_its_own() -> None:
+    from virl_quad.envs.quadruped import EnvConfig
+    from virl_quad.reward.config import OptimConfig, RewardConfig
+    from virl_quad.training.config import TrainArgs
+
+    a, b = RewardConfig(), RewardConfig()
+    assert isinstance(a.optim, OptimConfig) and a.optim == OptimConfig()
+    a.optim.lr = 5e-4
+    assert b.optim.lr == OptimConfig().lr                 # not one shared default object
+    assert TrainArgs().env is not TrainArgs().env
+    assert EnvConfig().demo is None                       # a plain field keeps its own default
+    assert RewardConfig.make(lr=3e-4).optim.lr == 3e-4

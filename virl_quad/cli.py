@@ -196,7 +196,24 @@ def replace_options(obj: Any, **values: Any) -> Any:
 
 
 class Sectioned:
-    """Base of a dataclass whose fields are options and sections of options (flat names)."""
+    """Base of a dataclass whose fields are options and sections of options (flat names).
+
+    A field annotated with a dataclass and given no default is a section: it defaults to that
+    dataclass's defaults (``env: EnvOptions`` means ``field(default_factory=EnvOptions)``).
+    """
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        module = sys.modules[cls.__module__].__dict__
+        for name, hint in cls.__dict__.get("__annotations__", {}).items():
+            if name in cls.__dict__:
+                continue
+            try:
+                kind = eval(hint, module) if isinstance(hint, str) else hint  # the module's own annotation
+            except Exception:
+                continue
+            if dataclasses.is_dataclass(kind):
+                setattr(cls, name, dataclasses.field(default_factory=kind))
 
     @classmethod
     def make(cls, **values: Any) -> Any:

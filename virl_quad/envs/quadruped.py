@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -96,10 +96,10 @@ class EnvConfig(Sectioned):
 
     demo: Demonstration | None = None      # demonstration: expert_image, phase, RSI
     oracle_reward: bool = False            # reward = ground-truth pose-imitation score (needs demo.motion)
-    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
-    action: ActionConfig = field(default_factory=ActionConfig)
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
-    camera: CameraConfig = field(default_factory=CameraConfig)
+    episode: EpisodeConfig
+    action: ActionConfig
+    physics: PhysicsConfig
+    camera: CameraConfig
 
 
 def _with_timing(spec: RobotSpec, cfg: EnvConfig) -> RobotSpec:

@@ -133,12 +133,12 @@ class RewardConfig(Sectioned):
     """
 
     variant: str = "virl"
-    arch: ArchitectureConfig = field(default_factory=ArchitectureConfig)
-    loss: LossConfig = field(default_factory=LossConfig)
-    pairs: PairConfig = field(default_factory=PairConfig)
-    optim: OptimConfig = field(default_factory=OptimConfig)
-    reward: RewardShapeConfig = field(default_factory=RewardShapeConfig)
-    store: StoreConfig = field(default_factory=StoreConfig)
+    arch: ArchitectureConfig
+    loss: LossConfig
+    pairs: PairConfig
+    optim: OptimConfig
+    reward: RewardShapeConfig
+    store: StoreConfig
 
     def validate(self) -> "RewardConfig":
         """Raise ValueError (one line) on an inconsistent setting; return self."""

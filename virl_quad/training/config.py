@@ -7,7 +7,7 @@ distance model to a GPU when there is one (the simulation stays on the CPU).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from virl_quad.cli import Sectioned, from_options, opt, options
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
@@ -76,8 +76,9 @@ class PriorOptions:
         " pose")
     prior_from: str = opt("video",
         "where the trajectory generator's parameters come from: video (fitted to the demonstration's "
-        "frames by rendering candidate gaits and keeping the closest, the video alone) or motion (least "
-        "squares on the demonstration's reference motion, else the built-in gait of its name)", choices=PRIOR_SOURCES)
+        "frames by rendering candidate gaits and keeping the closest, the video alone) or motion "
+        "(least squares on the demonstration's reference motion, else the built-in gait of its name)",
+        choices=PRIOR_SOURCES)
     warm_start_rounds: int = opt(4,
         "with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before "
         "PPO (0: start PPO from a fresh actor)")
@@ -139,12 +140,12 @@ class EvalOptions:
 class TrainArgs(Sectioned):
     """Options of ``python -m virl_quad.train``, one section per concern (flat option names)."""
 
-    run: RunOptions = field(default_factory=RunOptions)
-    env: EnvOptions = field(default_factory=EnvOptions)
-    prior: PriorOptions = field(default_factory=PriorOptions)
-    distance: DistanceOptions = field(default_factory=DistanceOptions)
-    ppo: PPOOptions = field(default_factory=PPOOptions)
-    eval: EvalOptions = field(default_factory=EvalOptions)
+    run: RunOptions
+    env: EnvOptions
+    prior: PriorOptions
+    distance: DistanceOptions
+    ppo: PPOOptions
+    eval: EvalOptions
 
 
 def validate(args: TrainArgs) -> None:
