@@ -294,6 +294,7 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
                                args.prior.warm_start_rounds, args.prior.warm_start_steps, args.env.randomize, log)
         runner.wall_time += time.time() - t0
         runner.alg.fix_actor_normalizer()
+        runner.alg.anchor_actor(args.ppo.prior_pull)
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
             f"{student['episodes']} episodes, mean travel {student['travel_m']:+.2f} m")
         if demo.motion is not None:

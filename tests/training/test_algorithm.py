@@ -71,3 +71,29 @@ def test_a_fixed_actor_normalizer_keeps_its_statistics():
     alg.update()
     assert torch.equal(alg.actor.obs_normalizer._mean, mean)
     assert not torch.equal(alg.critic.obs_normalizer._mean, torch.zeros_like(alg.critic.obs_normalizer._mean))
+
+
+def test_the_prior_pull_moves_the_actor_part_of_the_way_back_to_the_warm_start():
+    import copy
+
+    alg = _ppo()
+    _fill(alg)
+    start = [p.detach().clone() for p in alg.actor.parameters()]
+    free = copy.deepcopy(alg)
+    alg.anchor_actor(0.25)
+    torch.manual_seed(1)
+    free.update()
+    torch.manual_seed(1)
+    alg.update()
+    for p, q, p0 in zip(alg.actor.parameters(), free.actor.parameters(), start):
+        torch.testing.assert_close(p, q + 0.25 * (p0 - q))          # theta <- theta + pull (theta_0 - theta)
+    assert any(not torch.equal(p, p0) for p, p0 in zip(alg.actor.parameters(), start))
+    alg.anchor_actor(0.0)
+    assert alg.anchor is None
+
+
+def test_a_pull_outside_0_1_is_refused():
+    import pytest
+
+    with pytest.raises(ValueError, match="prior pull"):
+        _ppo().anchor_actor(1.0)

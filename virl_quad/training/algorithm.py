@@ -37,6 +37,8 @@ class _ActorRate:
         return self.optimizer.param_groups[:1]
 
     def __getattr__(self, name: str):
+        if name == "optimizer":      # not set yet (a copy being built): no recursion
+            raise AttributeError(name)
         return getattr(self.optimizer, name)
 
 
@@ -59,6 +61,10 @@ class VirlPPO(PPO):
         #: torch's CPU threads while the distance model and PPO learn (the env workers wait
         #: then, their cores free); None: torch's setting stays as it is
         self.learn_threads: int | None = None
+        #: the warm-started actor's weights and the fraction of the way back to them that the
+        #: actor's weights move after every PPO update (see anchor_actor)
+        self.anchor: list[torch.Tensor] | None = None
+        self.prior_pull = 0.0
 
     @contextlib.contextmanager
     def _learning_threads(self) -> Iterator[None]:
@@ -107,9 +113,30 @@ class VirlPPO(PPO):
         with self._learning_threads():
             return self._update()
 
+    def anchor_actor(self, pull: float, weights: list[torch.Tensor] | None = None) -> None:
+        """Pull the actor back towards ``weights`` (default: its present ones, the warm start)
+        by the fraction ``pull`` after every PPO update: ``theta <- theta + pull (theta_0 - theta)``,
+        weight decay towards the prior rather than towards 0. PPO's drift on a noisy reward
+        decays with a half-life of about ln 2 / pull iterations; a push the reward keeps up
+        holds. 0: no anchor."""
+        if not 0.0 <= pull < 1.0:
+            raise ValueError(f"prior pull must be in [0, 1), got {pull}")
+        self.prior_pull = float(pull)
+        src = list(self.actor.parameters()) if weights is None else weights
+        self.anchor = [w.detach().clone() for w in src] if pull > 0 else None
+
+    def _pull_to_anchor(self) -> None:
+        if self.anchor is None:
+            return
+        with torch.no_grad():
+            for p, p0 in zip(self.actor.parameters(), self.anchor):
+                p.lerp_(p0.to(p.device), self.prior_pull)
+
     def _update(self) -> dict[str, float]:
         if self.frozen_updates <= 0:
-            return super().update()
+            losses = super().update()
+            self._pull_to_anchor()
+            return losses
         self.frozen_updates -= 1
         params = list(self.actor.parameters())
         trainable = [p.requires_grad for p in params]

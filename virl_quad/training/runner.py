@@ -81,6 +81,7 @@ class VirlRunner(OnPolicyRunner):
                 "wall_time": self.wall_time, "rng": checkpoint.rng_state(), "last_eval": self.last_eval,
                 "standing": self.standing, "frozen_updates": self.alg.frozen_updates,
                 "actor_normalizer_fixed": not self.alg.actor.obs_normalization,
+                "anchor": {"pull": self.alg.prior_pull, "weights": self.alg.anchor},
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
@@ -99,6 +100,9 @@ class VirlRunner(OnPolicyRunner):
         self.alg.freeze_actor(int(data.get("frozen_updates", 0)))
         if data.get("actor_normalizer_fixed"):
             self.alg.fix_actor_normalizer()
+        anchor = data.get("anchor") or {}
+        if anchor.get("weights") is not None:
+            self.alg.anchor_actor(float(anchor["pull"]), anchor["weights"])
         checkpoint.set_rng_state(data["rng"])
 
     # -- the loop -----------------------------------------------------------------------------
