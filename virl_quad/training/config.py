@@ -118,10 +118,10 @@ class PPOOptions:
         "initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint "
         "residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)")
     hidden: str = opt("256,128", "actor/critic MLP hidden sizes, comma separated")
-    prior_pull: float = opt(0.0,
+    prior_pull: float = opt(0.02,
         "after every PPO update the actor's weights move this fraction of the way back to the warm "
-        "start's (weight decay towards the prior; 0: none): drift on a noisy learned reward fades, a "
-        "push the reward keeps up holds")
+        "start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: none): drift "
+        "on a noisy learned reward fades, a push the reward keeps up holds")
     critic_warmup: int = opt(10,
         "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
         "advantages come from a critic that knows the warm-started policy")
