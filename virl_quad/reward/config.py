@@ -56,8 +56,12 @@ class LossConfig:
     w_raes: float = 0.1               # sequence autoencoder L2 (reversed-order decoding)
     w_vaei: float = 0.1               # per-frame VAE loss (reconstruction + KL)
     margin: float = 1.0               # contrastive margin on the SQUARED distance
-    vae_beta: float = 1e-3            # KL weight inside L_VAEI; reconstruction is a per-pixel
-                                      # mean, KL a sum over latent dims (project choice)
+    vae_beta: float = 1e-5            # KL weight inside L_VAEI; reconstruction is a per-pixel
+                                      # mean, KL a sum over latent dims (project choice): about
+                                      # 0.02 of a standard VAE's (pixel-sum) KL weight. The KL pulls
+                                      # the sigmoid mean e towards 0; stronger, that pull can
+                                      # saturate every unit, the encoder then maps every frame to
+                                      # the same e and every behaviour gets reward 1
     ae_frames: int = 128              # frames decoded per update for each of L_RAES and L_VAEI: a
                                       # random subset (unbiased for the mean); 0 = all (CPU cost)
 

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from virl_quad.reward.base import _CHUNK, FORMAT, RewardModel, StreamState
+from virl_quad.reward.base import _CHUNK, FORMAT, RewardModel, StreamState, eval_mode
 from virl_quad.reward.config import RewardConfig
 from virl_quad.reward.frames import FRAME, to_uint8
 from virl_quad.reward.losses import total_loss
@@ -42,6 +42,21 @@ class VirlReward(RewardModel):
         loss, logs = total_loss(self.net, a, b, y)
         logs["window"] = float(batch.a.shape[0])
         return loss, logs
+
+    def update(self, num_updates: int) -> dict[str, float]:
+        """As :meth:`RewardModel.update`, plus ``e_spread`` (see :meth:`encoding_spread`)."""
+        logs = super().update(num_updates)
+        if logs:
+            logs["e_spread"] = self.encoding_spread()
+        return logs
+
+    def encoding_spread(self) -> float:
+        """Mean over latent units of the standard deviation, over the demonstration's frames, of
+        the reward copy's frame encoding e (in (0, 1)): near 0 the encoder has collapsed, it maps
+        every frame alike and every behaviour gets reward 1 (healthy models: 0.04-0.1)."""
+        x = torch.from_numpy(self.demo[:512]).to(self.device).float() / 255.0
+        with torch.no_grad(), eval_mode(self.reward_net):
+            return float(self._encode(x).std(0).mean())
 
     def _encode(self, x: torch.Tensor) -> torch.Tensor:
         lead = x.shape[:-2]
