@@ -221,3 +221,15 @@ def test_where_the_robot_stands_on_the_ground_does_not_change_the_distance():
         rm.update(2)
         dist = rm.distance(torch.from_numpy(d.frames[:40, None]), torch.from_numpy(shifted[:40, None]))
         assert (float(dist.max()) < 1e-6) == paint, float(dist.max())
+
+
+def test_the_encoding_spread_is_logged_and_reads_0_for_a_collapsed_encoder(small_cfg, demo, other, agent_episode):
+    rm = make("virl", small_cfg, demo, other, agent_episode)
+    logs = rm.update(1)
+    assert logs["e_spread"] == pytest.approx(rm.encoding_spread()) and logs["e_spread"] > 1e-4
+    with torch.no_grad():                        # every sigmoid unit saturated: one code for every frame
+        rm.reward_net.phi.mu.weight.zero_()
+        rm.reward_net.phi.mu.bias.fill_(-30.0)
+    assert rm.encoding_spread() < 1e-9
+    agent, expert, dones = rollout(1)
+    assert torch.all(rm.recompute(agent, expert, dones, rm.stream_state(dones.shape[1])) > 0.999)

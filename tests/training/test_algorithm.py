@@ -97,3 +97,19 @@ def test_a_pull_outside_0_1_is_refused():
 
     with pytest.raises(ValueError, match="prior pull"):
         _ppo().anchor_actor(1.0)
+
+
+def test_a_collapsed_distance_model_is_reported_once_after_its_first_100_iterations():
+    import types
+
+    from virl_quad.training.runner import COLLAPSED_SPREAD, VirlRunner
+
+    lines: list[str] = []
+    runner = types.SimpleNamespace(_collapse_warned=False)
+    VirlRunner._warn_collapse(runner, 50, 1e-5, lines.append)             # early: not yet
+    VirlRunner._warn_collapse(runner, 150, 2 * COLLAPSED_SPREAD, lines.append)   # healthy
+    VirlRunner._warn_collapse(runner, 150, None, lines.append)            # no distance model
+    assert lines == []
+    VirlRunner._warn_collapse(runner, 150, 1e-5, lines.append)
+    VirlRunner._warn_collapse(runner, 175, 1e-5, lines.append)
+    assert len(lines) == 1 and lines[0].startswith("warning: the distance model's frame encoder has collapsed")

@@ -25,6 +25,10 @@ from tensordict import TensorDict
 from virl_quad.envs.workers import EnvWorkerLost
 from virl_quad.training import checkpoint
 
+#: below this spread of its encodings over the demonstration (units of e, in (0, 1)) the distance
+#: model's frame encoder counts as collapsed (trained healthy models: 0.04-0.1; collapsed ~1e-5)
+COLLAPSED_SPREAD = 0.005
+
 
 def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
     """Wrap an rsl-rl actor as ``obs dict -> action`` (deterministic mean, numpy)."""
@@ -72,6 +76,7 @@ class VirlRunner(OnPolicyRunner):
         self.writer = None
         self._episode_len = torch.zeros(env.num_envs)
         self._finished_lengths: list[float] = []
+        self._collapse_warned = False
 
     # -- checkpoints --------------------------------------------------------------------------
     def checkpoint_payload(self) -> dict:
@@ -195,6 +200,15 @@ class VirlRunner(OnPolicyRunner):
             writer.add_scalar(f"eval/{k}", v, self.current_learning_iteration)
         return self.last_eval
 
+    def _warn_collapse(self, it: int, spread: float | None, log: Callable[[str], None]) -> None:
+        """One line, once, when the distance model's frame encoder has collapsed (every frame
+        encoded alike: every behaviour gets reward 1) after its first 100 iterations."""
+        if spread is None or it < 100 or spread >= COLLAPSED_SPREAD or self._collapse_warned:
+            return
+        self._collapse_warned = True
+        log(f"warning: the distance model's frame encoder has collapsed (encoding spread {spread:.1e} over "
+            f"the demonstration, healthy 0.04-0.1): its reward no longer tells behaviours apart")
+
     def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
                 log: Callable[[str], None], minutes: float = 0.0) -> None:
         info = self.alg.last_reward_info
@@ -212,6 +226,7 @@ class VirlRunner(OnPolicyRunner):
         log(f"it {it:5d}/{total} | steps {self.env_steps:9,d} | {sps:6.0f} st/s | reward {info['reward_mean']:.3f}"
             f" | dist-loss {dist:.4f} | ep-len {ep_len:5.2f}s | eval {eval_summary(self.last_eval, self.standing)}"
             f" | ETA {eta / 60:5.1f} min")
+        self._warn_collapse(it, info.get("distance/e_spread"), log)
         w = self.writer
         w.add_scalar("train/reward_mean", info["reward_mean"], it)
         w.add_scalar("train/episode_seconds", ep_len, it)
