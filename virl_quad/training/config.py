@@ -119,9 +119,9 @@ class PPOOptions:
         "residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)")
     hidden: str = opt("256,128", "actor/critic MLP hidden sizes, comma separated")
     prior_pull: float = opt(0.02,
-        "after every PPO update the actor's weights move this fraction of the way back to the warm "
-        "start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: none): drift "
-        "on a noisy learned reward fades, a push the reward keeps up holds")
+        "with a warm start: after every PPO update the actor's weights move this fraction of the way "
+        "back to the warm start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: "
+        "none): drift on a noisy learned reward fades, a push the reward keeps up holds")
     critic_warmup: int = opt(10,
         "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
         "advantages come from a critic that knows the warm-started policy")
