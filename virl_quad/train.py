@@ -25,7 +25,7 @@ import torch
 
 from virl_quad.cli import UserError, dataclass_from_args, options, parser_from_dataclass, replace_options, run_main
 from virl_quad.training import checkpoint
-from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, from_dict, rsl_rl_config, to_dict, validate
+from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, from_dict, prior_pull, rsl_rl_config, to_dict, validate
 
 
 def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
@@ -294,7 +294,7 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
                                args.prior.warm_start_rounds, args.prior.warm_start_steps, args.env.randomize, log)
         runner.wall_time += time.time() - t0
         runner.alg.fix_actor_normalizer()
-        runner.alg.anchor_actor(args.ppo.prior_pull)
+        runner.alg.anchor_actor(prior_pull(args))
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
             f"{student['episodes']} episodes, mean travel {student['travel_m']:+.2f} m")
         if demo.motion is not None:

@@ -118,10 +118,11 @@ class PPOOptions:
         "initial action std in action units (x the action scale, 0.5 rad on Pupper: 0.025 rad per joint "
         "residual): rollouts stay close to the warm start that walks (motion_imitation fixes 0.125)")
     hidden: str = opt("256,128", "actor/critic MLP hidden sizes, comma separated")
-    prior_pull: float = opt(0.02,
+    prior_pull: float = opt(-1.0,
         "with a warm start: after every PPO update the actor's weights move this fraction of the way "
         "back to the warm start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: "
-        "none): drift on a noisy learned reward fades, a push the reward keeps up holds")
+        "none): drift on a noisy learned reward fades, a push the reward keeps up holds. -1: 0.02, "
+        "but 0 with --reward oracle (an exact reward needs no guard, and the anchor slows its gains)")
     critic_warmup: int = opt(10,
         "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
         "advantages come from a critic that knows the warm-started policy")
@@ -152,6 +153,13 @@ class TrainArgs(Sectioned):
     eval: EvalOptions
 
 
+def prior_pull(args: TrainArgs) -> float:
+    """The anchor's pull per PPO update (``--prior-pull``; -1: 0.02, 0 with the oracle reward)."""
+    if args.ppo.prior_pull >= 0:
+        return float(args.ppo.prior_pull)
+    return 0.0 if args.run.reward == "oracle" else 0.02
+
+
 def validate(args: TrainArgs) -> None:
     """Raise ValueError (one line) for inconsistent options."""
     from virl_quad import robots
@@ -165,8 +173,8 @@ def validate(args: TrainArgs) -> None:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {values[name]}")
     if not 0 <= args.ppo.critic_learning_rate <= 1:
         raise ValueError(f"--critic-learning-rate must lie in [0, 1], got {args.ppo.critic_learning_rate}")
-    if not 0 <= args.ppo.prior_pull < 1:
-        raise ValueError(f"--prior-pull must lie in [0, 1), got {args.ppo.prior_pull}")
+    if not (0 <= args.ppo.prior_pull < 1 or args.ppo.prior_pull == -1):
+        raise ValueError(f"--prior-pull must lie in [0, 1) or be -1 (auto), got {args.ppo.prior_pull}")
     if not 0 < args.ppo.init_std <= 2:
         raise ValueError(f"--init-std must lie in (0, 2] action units, got {args.ppo.init_std}")
     for name in ("num_envs", "iterations", "steps_per_env", "save_every", "warm_start_steps"):
