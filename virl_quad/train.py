@@ -56,6 +56,10 @@ def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict
         typed = options(args)
         args = replace_options(saved, **{k: typed[k] for k in explicit if k not in ("resume", "run_dir")},
                                resume=str(run_dir), run_dir=str(run_dir))
+        validate(args)
+        if "prior_pull" in explicit and prior_pull(args) > 0 and (data.get("anchor") or {}).get("weights") is None:
+            raise UserError(f"--prior-pull {prior_pull(args):g}: {run_dir} keeps no warm start to pull towards "
+                            "(it was trained with --prior-pull 0 or without a warm start)")
         return args, run_dir, data
     run_dir = Path(args.run.run_dir or f"runs/{args.run.robot}-{args.run.reward}-{time.strftime('%Y%m%d-%H%M%S')}")
     if (run_dir / checkpoint.LATEST).exists():
@@ -236,6 +240,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps); "
                 f"--iterations {args.run.iterations} is the total, so at most "
                 f"{max(args.run.iterations - runner.current_learning_iteration, 0)} more")
+            if "prior_pull" in explicit:
+                _reanchor(args, runner, log)
         log(f"demonstration: {demo.source or args.run.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
         if not runner.standing and demo.motion is not None:
@@ -256,6 +262,14 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         env.close()
     finish(args, run_dir, demo, runner, log)
     return 0
+
+
+def _reanchor(args: TrainArgs, runner, log) -> None:
+    """A resume with --prior-pull typed: the saved warm start stays the anchor, the pull is the new one."""
+    pull = prior_pull(args)
+    was = runner.alg.prior_pull
+    runner.alg.anchor_actor(pull, runner.alg.anchor)
+    log(f"anchor to the warm start: pull {pull:g} per PPO update (the checkpoint's: {was:g})")
 
 
 def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:

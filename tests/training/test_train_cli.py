@@ -108,6 +108,9 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     assert p.returncode == 0, p.stderr[-2000:]
     assert "trajectory generator: fitted to the video" in p.stdout, p.stdout[-2000:]
     assert (run_dir / "prior_fit.png").is_file() and json.loads((run_dir / "prior_fit.json").read_text())["tg"]
+    # the oracle's run has no anchor (pull 0): a pull typed on resume has nothing to pull towards
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2", "--prior-pull", "0.05")
+    assert p.returncode == 2 and "keeps no warm start" in p.stderr and len(p.stderr.strip().splitlines()) == 1
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2")
     assert p.returncode == 0 and "resumed at iteration 1" in p.stdout, p.stderr[-2000:]
     out = tmp_path / "tg.pt"
@@ -122,6 +125,22 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     cmd, reason = runner.handle(P.encode_state(P.RobotState.standing(spec), 1, active=True))
     assert reason == "" and np.all(np.isfinite(P.decode(cmd).body.q_target))
     assert runner.last_action.shape == (14,)
+
+
+def test_resume_keeps_the_anchor_and_takes_a_typed_pull(tmp_path: Path) -> None:
+    """The warm start's weights travel in the checkpoint; --prior-pull typed on resume changes the pull only."""
+    run_dir = tmp_path / "run"
+    p = run("virl_quad.train", "--robot", "pupper", "--reward", "prior", "--iterations", "1",
+            "--run-dir", str(run_dir), *TINY)
+    assert p.returncode == 0, p.stderr[-2000:]
+    saved = checkpoint.load(run_dir)["anchor"]
+    assert saved["pull"] == pytest.approx(0.02) and saved["weights"]
+    p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2", "--prior-pull", "0.1")
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "pull 0.1 per PPO update (the checkpoint's: 0.02)" in p.stdout
+    anchor = checkpoint.load(run_dir)["anchor"]
+    assert anchor["pull"] == pytest.approx(0.1)
+    assert all(torch.equal(a, b) for a, b in zip(anchor["weights"], saved["weights"]))
 
 
 def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:

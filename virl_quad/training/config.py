@@ -122,7 +122,8 @@ class PPOOptions:
         "with a warm start: after every PPO update the actor's weights move this fraction of the way "
         "back to the warm start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: "
         "none): drift on a noisy learned reward fades, a push the reward keeps up holds. -1: 0.02, "
-        "but 0 with --reward oracle (an exact reward needs no guard, and the anchor slows its gains)")
+        "but 0 with --reward oracle (an exact reward needs no guard, and the anchor slows its gains). "
+        "With --resume: the saved warm start stays the anchor, typed here the pull changes")
     critic_warmup: int = opt(10,
         "iterations at the start of a run that fit the critic alone (actor frozen): PPO's first "
         "advantages come from a critic that knows the warm-started policy")
