@@ -105,11 +105,26 @@ def test_a_collapsed_distance_model_is_reported_once_after_its_first_100_iterati
     from virl_quad.training.runner import COLLAPSED_SPREAD, VirlRunner
 
     lines: list[str] = []
-    runner = types.SimpleNamespace(_collapse_warned=False)
+    runner = types.SimpleNamespace(_collapse_warned=False, _peak_spread=0.0)
     VirlRunner._warn_collapse(runner, 50, 1e-5, lines.append)             # early: not yet
-    VirlRunner._warn_collapse(runner, 150, 2 * COLLAPSED_SPREAD, lines.append)   # healthy
+    VirlRunner._warn_collapse(runner, 80, 0.08, lines.append)             # healthy, then ...
+    VirlRunner._warn_collapse(runner, 150, 2 * COLLAPSED_SPREAD, lines.append)
     VirlRunner._warn_collapse(runner, 150, None, lines.append)            # no distance model
     assert lines == []
-    VirlRunner._warn_collapse(runner, 150, 1e-5, lines.append)
+    VirlRunner._warn_collapse(runner, 150, 1e-5, lines.append)            # ... collapsed
     VirlRunner._warn_collapse(runner, 175, 1e-5, lines.append)
     assert len(lines) == 1 and lines[0].startswith("warning: the distance model's frame encoder has collapsed")
+    assert "down from 0.08" in lines[0]
+
+
+def test_an_encoder_that_never_spread_is_not_called_collapsed():
+    import types
+
+    from virl_quad.training.runner import VirlRunner
+
+    lines: list[str] = []
+    runner = types.SimpleNamespace(_collapse_warned=False, _peak_spread=0.0)
+    for it, spread in ((1, 7e-4), (60, 1.6e-3), (120, 3e-4)):         # an untrained encoder's spread
+        VirlRunner._warn_collapse(runner, it, spread, lines.append)
+    assert len(lines) == 1 and "still encodes the demonstration's frames alike after 120 iterations" in lines[0]
+    assert "collapsed" not in lines[0]

@@ -28,6 +28,9 @@ from virl_quad.training import checkpoint
 #: below this spread of its encodings over the demonstration (units of e, in (0, 1)) the distance
 #: model's frame encoder counts as collapsed (trained healthy models: 0.04-0.1; collapsed ~1e-5)
 COLLAPSED_SPREAD = 0.005
+#: a spread this large once counts as having learned the frames (a later fall below
+#: COLLAPSED_SPREAD is then a collapse, not a model that never spread)
+SPREAD_LEARNED = 0.02
 
 
 def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
@@ -77,6 +80,7 @@ class VirlRunner(OnPolicyRunner):
         self._episode_len = torch.zeros(env.num_envs)
         self._finished_lengths: list[float] = []
         self._collapse_warned = False
+        self._peak_spread = 0.0       # the largest encoding spread seen in this run
 
     # -- checkpoints --------------------------------------------------------------------------
     def checkpoint_payload(self) -> dict:
@@ -87,6 +91,7 @@ class VirlRunner(OnPolicyRunner):
                 "standing": self.standing, "frozen_updates": self.alg.frozen_updates,
                 "actor_normalizer_fixed": not self.alg.actor.obs_normalization,
                 "anchor": {"pull": self.alg.prior_pull, "weights": self.alg.anchor},
+                "peak_spread": self._peak_spread,
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
@@ -108,6 +113,7 @@ class VirlRunner(OnPolicyRunner):
         anchor = data.get("anchor") or {}
         if anchor.get("weights") is not None:
             self.alg.anchor_actor(float(anchor["pull"]), anchor["weights"])
+        self._peak_spread = float(data.get("peak_spread", 0.0))
         checkpoint.set_rng_state(data["rng"])
 
     # -- the loop -----------------------------------------------------------------------------
@@ -201,13 +207,21 @@ class VirlRunner(OnPolicyRunner):
         return self.last_eval
 
     def _warn_collapse(self, it: int, spread: float | None, log: Callable[[str], None]) -> None:
-        """One line, once, when the distance model's frame encoder has collapsed (every frame
-        encoded alike: every behaviour gets reward 1) after its first 100 iterations."""
-        if spread is None or it < 100 or spread >= COLLAPSED_SPREAD or self._collapse_warned:
+        """One line, once, when after its first 100 iterations the distance model's frame encoder
+        maps the demonstration's frames alike: it collapsed (its spread was healthy once) or it never
+        spread them out. Either way its reward tells behaviours apart poorly."""
+        if spread is None:
+            return
+        self._peak_spread = max(self._peak_spread, spread)
+        if it < 100 or spread >= COLLAPSED_SPREAD or self._collapse_warned:
             return
         self._collapse_warned = True
-        log(f"warning: the distance model's frame encoder has collapsed (encoding spread {spread:.1e} over "
-            f"the demonstration, healthy 0.04-0.1): its reward no longer tells behaviours apart")
+        what = (f"has collapsed (encoding spread over the demonstration {spread:.1e}, down from "
+                f"{self._peak_spread:.2f}; healthy 0.04-0.1): its reward no longer tells behaviours apart"
+                if self._peak_spread >= SPREAD_LEARNED else
+                f"still encodes the demonstration's frames alike after {it} iterations (spread {spread:.1e}, "
+                f"healthy 0.04-0.1): its reward tells behaviours apart poorly until they spread")
+        log(f"warning: the distance model's frame encoder {what}")
 
     def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
                 log: Callable[[str], None], minutes: float = 0.0) -> None:
