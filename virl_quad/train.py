@@ -56,10 +56,6 @@ def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict
         typed = options(args)
         args = replace_options(saved, **{k: typed[k] for k in explicit if k not in ("resume", "run_dir")},
                                resume=str(run_dir), run_dir=str(run_dir))
-        validate(args)
-        if "prior_pull" in explicit and prior_pull(args) > 0 and (data.get("anchor") or {}).get("weights") is None:
-            raise UserError(f"--prior-pull {prior_pull(args):g}: {run_dir} keeps no warm start to pull towards "
-                            "(it was trained with --prior-pull 0 or without a warm start)")
         return args, run_dir, data
     run_dir = Path(args.run.run_dir or f"runs/{args.run.robot}-{args.run.reward}-{time.strftime('%Y%m%d-%H%M%S')}")
     if (run_dir / checkpoint.LATEST).exists():
@@ -212,6 +208,10 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     t_start = time.time()                          # --minutes counts from here: prior fit and warm start included
     args, run_dir, data = _resolve(args, explicit)
     validate(args)
+    reanchor = data is not None and "prior_pull" in explicit
+    if reanchor and prior_pull(args) > 0 and (data.get("anchor") or {}).get("weights") is None:
+        raise UserError(f"--prior-pull {prior_pull(args):g}: {run_dir} keeps no warm start to pull towards "
+                        "(it was trained with --prior-pull 0 or without a warm start)")
     if int(os.environ.get("WORLD_SIZE", "1")) > 1:
         raise UserError("multi-GPU training (torchrun, WORLD_SIZE > 1) is not supported: each rank would learn "
                         "its own distance model; run one process per GPU (docs/cluster.md)")
@@ -240,7 +240,7 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             log(f"resumed at iteration {runner.current_learning_iteration} ({runner.env_steps:,d} env steps); "
                 f"--iterations {args.run.iterations} is the total, so at most "
                 f"{max(args.run.iterations - runner.current_learning_iteration, 0)} more")
-            if "prior_pull" in explicit:
+            if reanchor:
                 _reanchor(args, runner, log)
         log(f"demonstration: {demo.source or args.run.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")

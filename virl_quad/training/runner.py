@@ -209,7 +209,8 @@ class VirlRunner(OnPolicyRunner):
     def _warn_collapse(self, it: int, spread: float | None, log: Callable[[str], None]) -> None:
         """One line, once, when after its first 100 iterations the distance model's frame encoder
         maps the demonstration's frames alike: it collapsed (its spread was healthy once) or it never
-        spread them out. Either way its reward tells behaviours apart poorly."""
+        spread them out (told apart by the peak spread, which this keeps). Either way its reward
+        tells behaviours apart poorly."""
         if spread is None:
             return
         self._peak_spread = max(self._peak_spread, spread)
