@@ -84,6 +84,14 @@ def _episode_options(k: int) -> dict | None:
     return {"demo_step": 0} if k % 2 == 0 else None
 
 
+def gathering_envs(args: DistillArgs, demo, env_options: dict | None = None) -> tuple:
+    """The two envs DAgger gathers in (reference-state initialisation off, on; no frames
+    rendered), with ``env_options`` (e.g. the run's trajectory generator) passed to ``envs.make``."""
+    ranges = {"latency": (0.0, args.max_latency)} if args.randomize and args.max_latency is not None else None
+    return tuple(envs.make(args.robot, demo=demo, randomize=args.randomize, randomization=ranges, render=False,
+                           rsi=rsi, episode_seconds=10.0, **(env_options or {})) for rsi in (False, True))
+
+
 def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: int, rng: np.random.Generator,
            args: DistillArgs, first_episode: int, motion=None) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """Run ``steps`` control steps, executing the tracker (of ``motion``, default the
@@ -180,9 +188,7 @@ def distil(args: DistillArgs, log=print, demo=None, env_options: dict | None = N
         raise UserError(f"demonstration {args.demo!r} has no reference motion: the tracker needs one")
     hidden = tuple(int(h) for h in args.hidden.split(","))
     rng, gen = np.random.default_rng(args.seed), torch.Generator().manual_seed(args.seed)
-    ranges = {"latency": (0.0, args.max_latency)} if args.randomize and args.max_latency is not None else None
-    pair = tuple(envs.make(args.robot, demo=d, randomize=args.randomize, randomization=ranges, render=False, rsi=rsi,
-                           episode_seconds=10.0, **(env_options or {})) for rsi in (False, True))
+    pair = gathering_envs(args, d, env_options)
     contract = pair[0].unwrapped.contract
     actor = fresh_actor(contract, hidden, seed=args.seed)
     if args.blind_last_action:

@@ -57,7 +57,8 @@ class VideoFitConfig:
     speed_scales: tuple[float, ...] = (0.5, 0.75, 1.0, 1.5, 2.0, 2.5)   # x the robot's built-in trot speed
     swing_scales: tuple[float, ...] = (0.5, 1.0, 1.5)    # x the built-in trot's swing height
     top_patterns: int = 4                                # patterns carried from the grid to the duty search
-    finalists: int = 4                                   # best candidates listed in the report
+    finalists: int = 4                                   # best candidates: in the report; the physics check
+                                                         # (virl_quad.training.prior_check) tries them in turn
 
 
 def silhouettes(frames: np.ndarray) -> np.ndarray:
@@ -223,7 +224,8 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
 
     Returns ``(params, report, fitted silhouettes (T, 48, 48) aligned with the video's)``; the report
     holds ``period_frames``, ``periodicity``, ``distance`` (of the fit, gray levels / 255),
-    ``candidates`` (renders made), ``seconds`` and ``finalists`` (the best candidates). ValueError
+    ``candidates`` (renders made), ``seconds`` and ``finalists`` (the best candidates, nearest first,
+    each with its parameters as ``tg``: :meth:`TGParams.to_dict`). ValueError
     (one line) for a still video, one with no periodic motion, or one too short for two cycles."""
     t0 = time.time()
     raw = np.asarray(frames, dtype=np.float32) / 255.0
@@ -252,8 +254,24 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
               "candidates": len(scorer.cache), "seconds": time.time() - t0,
               "finalists": [{"offsets": list(relative_offsets(p.offsets)), "frequency_hz": p.frequency, "duty": p.duty,
                              "step_length_m": p.step_length, "swing_height_m": p.swing_height,
-                             "distance": scorer.cost(p)[0]} for p in finalists]}
+                             "distance": scorer.cost(p)[0], "tg": p.to_dict()} for p in finalists]}
     return best, report, render[shift:shift + len(frames)]
+
+
+def render_aligned(frames: np.ndarray, spec: RobotSpec, params: TGParams) -> np.ndarray:
+    """The silhouettes (T, 48, 48) of ``params`` rendered kinematically and aligned, at the best
+    time shift within one cycle, with those of the video ``frames`` (T, 48, 48) at the robot's
+    control rate: the contact sheet of a finalist other than the nearest."""
+    video = silhouettes(frames)
+    synth = Synthesizer(spec)
+    try:
+        scorer = _Scorer(video, synth, int(math.ceil(spec.control_hz / params.frequency)))
+        _, shift, render = scorer.cost(params)
+    finally:
+        synth.close()
+    if render is None:
+        raise ValueError("the TG's feet are out of the robot's reach")
+    return render[shift:shift + len(video)]
 
 
 def describe(params: TGParams, report: dict) -> str:
@@ -262,7 +280,9 @@ def describe(params: TGParams, report: dict) -> str:
             f"{[round(o, 3) for o in relative_offsets(params.offsets)]}, duty {params.duty:.2f}, step "
             f"{params.step_length * 100:.1f} cm, swing {params.swing_height * 100:.1f} cm; silhouettes "
             f"{report['distance'] * 255:.2f} gray levels apart ({report['candidates']} candidates, "
-            f"{report['seconds']:.0f} s)")
+            f"{report['seconds']:.0f} s)"
+            + (f"; finalist {report['kept_finalist']}: the nearer ones' trackers fell in more than half their "
+               "episodes" if report.get("kept_finalist") else ""))
 
 
 def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike, fps: float = 0.0,
