@@ -107,7 +107,10 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
             "--run-dir", str(run_dir), *TINY)
     assert p.returncode == 0, p.stderr[-2000:]
     assert "trajectory generator: fitted to the video" in p.stdout, p.stdout[-2000:]
-    assert (run_dir / "prior_fit.png").is_file() and json.loads((run_dir / "prior_fit.json").read_text())["tg"]
+    fit = json.loads((run_dir / "prior_fit.json").read_text())
+    assert (run_dir / "prior_fit.png").is_file() and fit["tg"]
+    assert "physics check, finalist 0" in p.stdout and fit["physics_check"][0]["episodes"] >= 1
+    assert fit["tg"] == fit["finalists"][fit["kept_finalist"]]["tg"]
     # the oracle's run has no anchor (pull 0): a pull typed on resume has nothing to pull towards
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2", "--prior-pull", "0.05")
     assert p.returncode == 2 and "keeps no warm start" in p.stderr and len(p.stderr.strip().splitlines()) == 1

@@ -12,6 +12,7 @@ import pytest
 from virl_quad import demo as demo_lib
 from virl_quad import robots
 from virl_quad.motion.gaits import PHASE_OFFSETS
+from virl_quad.policy.tg import TGParams
 from virl_quad.training.video_prior import (fit_tg_to_video, gait_period, relative_offsets, same_pattern,
                                             silhouettes)
 
@@ -43,6 +44,7 @@ def test_a_rendered_gait_fits_its_own_phase_pattern(gait: str) -> None:
     assert params.frequency == pytest.approx(2.0, rel=0.02)
     assert fitted.shape == demo.frames.shape and report["distance"] < 2 / 255
     assert report["finalists"][0]["distance"] == report["distance"]
+    assert TGParams.from_dict(report["finalists"][0]["tg"]) == params       # the physics check's input
 
 
 def test_same_pattern_ignores_the_global_phase() -> None:

@@ -81,8 +81,9 @@ class PriorOptions:
         choices=PRIOR_SOURCES)
     warm_start_rounds: int = opt(4,
         "with --tg: DAgger rounds that copy a tracker of the trajectory generator into the actor before "
-        "PPO (0: start PPO from a fresh actor)")
-    warm_start_steps: int = opt(4000, "control steps gathered per warm-start round")
+        "PPO (0: start PPO from a fresh actor, and the video fit's finalists get no physics check)")
+    warm_start_steps: int = opt(4000, "control steps gathered per warm-start round, and per finalist in the "
+                                "physics check of the video fit (its tracker on the physics robot)")
 
 
 @dataclass
