@@ -19,16 +19,17 @@ from virl_quad.training import checkpoint
 
 TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--eval-episodes", "1",
         "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1",
-        "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1", "--no-alignment-probe"]
+        "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1", "--no-alignment-probe",
+        "--prior-from", "motion"]   # the video fit (~20 s) and its physics check: the Laikago run and the --tg test
 
 
 def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
 
 
-#: Pupper also runs with the plain ground; Laikago with the reward's alignment probe.
+#: Pupper also runs with the plain ground; Laikago with the reward's alignment probe and the prior fitted to the video.
 EXTRA = {"pupper": ["--ground", "plain"],
-         "laikago": ["--alignment-probe", "--eval-every", "2"]}
+         "laikago": ["--alignment-probe", "--eval-every", "2", "--prior-from", "video"]}
 
 #: Options of retired features, with their old defaults, as checkpoints of older versions hold them.
 RETIRED = {"speed_strip": False, "speed_shift_weight": 0.25, "reward_warmup": 0, "reward_freeze_after": 0,
@@ -104,7 +105,7 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
 
     run_dir = tmp_path / "run"
     p = run("virl_quad.train", "--robot", "pupper", "--tg", "--reward", "oracle", "--iterations", "1",
-            "--run-dir", str(run_dir), *TINY)
+            "--run-dir", str(run_dir), *TINY, "--prior-from", "video")
     assert p.returncode == 0, p.stderr[-2000:]
     assert "trajectory generator: fitted to the video" in p.stdout, p.stdout[-2000:]
     fit = json.loads((run_dir / "prior_fit.json").read_text())
