@@ -50,14 +50,15 @@ def main() -> int:
             continue
         demo = demo_lib.load(str(source), a.robot)
         truth, _ = fit_tg(demo.motion, spec)
-        params, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec)
+        finalists, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec)
+        params = finalists[0]
         ok = same_pattern(params.offsets, truth.offsets)
         right, total = right + ok, total + 1
         print(f"| {name} | {_pattern(truth.offsets)} | {_pattern(params.offsets)} | {params.frequency:.2f} "
               f"({truth.frequency:.2f}) | {report['distance'] * 255:.2f} | {report['seconds']:.0f} | "
               f"{'right' if ok else 'WRONG'} |", flush=True)
         if a.sheets:
-            save_fit_sheet(silhouettes(demo.frames), fitted, a.sheets / f"{name}.png")
+            save_fit_sheet(silhouettes(demo.frames), fitted[0], a.sheets / f"{name}.png")
     print(f"\n{right} of {total} phase patterns right")
     return 0
 

@@ -150,24 +150,20 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
     """The TG fitted to the demonstration's frames, the nearest finalist whose warm-start teacher
     carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`); writes
     prior_fit.json and prior_fit.png (video | fitted gait) into the run folder."""
-    from virl_quad.policy.tg import TGParams
     from virl_quad.training.prior_check import pick_carrying
-    from virl_quad.training.video_prior import (describe, fit_tg_to_video, render_aligned, save_fit_sheet,
-                                                silhouettes)
+    from virl_quad.training.video_prior import describe, fit_tg_to_video, save_fit_sheet, silhouettes
 
     print("fitting the gait prior to the demonstration video ...", flush=True)
     say = lambda line: print(line, flush=True)
-    tg, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec, log=say)
+    finalists, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec, log=say)
+    k = 0
     if args.prior.warm_start_rounds > 0:
-        finalists = [TGParams.from_dict(f["tg"]) for f in report["finalists"]]
-        tg, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,
-                                                    args.run.seed, args.env.randomize, say)
-        k = report["kept_finalist"] = finalists.index(tg)
-        report["distance"] = report["finalists"][k]["distance"]
-        if k > 0:   # the sheet shows the kept gait
-            fitted = render_aligned(demo.frames, spec, tg)
+        k, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,
+                                                   args.run.seed, args.env.randomize, say)
+    tg = finalists[k]
+    report["kept_finalist"], report["distance"] = k, report["finalists"][k]["distance"]
     run_dir.mkdir(parents=True, exist_ok=True)
-    sheet = save_fit_sheet(silhouettes(demo.frames), fitted, run_dir / "prior_fit.png", fps=demo.fps,
+    sheet = save_fit_sheet(silhouettes(demo.frames), fitted[k], run_dir / "prior_fit.png", fps=demo.fps,
                            title=f"video | fit: {tg.frequency:.2f} Hz, duty {tg.duty:.2f}")
     (run_dir / "prior_fit.json").write_text(json.dumps({"tg": tg.to_dict(), **report}, indent=2) + "\n")
     return tg, f"{describe(tg, report)}; video | fit: {sheet}"

@@ -43,15 +43,15 @@ def test_the_trot_teacher_walks_and_a_tipping_one_falls(demo) -> None:
 def test_the_nearest_finalist_that_carries_the_robot_is_kept(demo) -> None:
     lines: list[str] = []
     kept, rows = pick_carrying(PUPPER, demo, [_tipping(), _trot(), _tipping()], STEPS, 0, False, lines.append)
-    assert kept == _trot()
+    assert kept == 1
     assert [r["finalist"] for r in rows] == [0, 1]                       # tried nearest first, stops at the first
     assert "finalist 0" in lines[0] and "fell in" in lines[0] and not any("warning" in l for l in lines)
 
 
 def test_when_every_finalist_falls_the_least_falling_is_kept_with_a_warning(demo) -> None:
     lines: list[str] = []
-    kept, rows = pick_carrying(PUPPER, demo, [_tipping()], STEPS, 0, False, lines.append)
-    assert kept == _tipping() and len(rows) == 1
+    kept, rows = pick_carrying(PUPPER, demo, [_tipping(), _tipping()], STEPS, 0, False, lines.append)
+    assert kept == 0 and len(rows) == 2
     assert lines[-1].startswith("warning:") and "cannot carry pupper" in lines[-1]
     with pytest.raises(ValueError):
         pick_carrying(PUPPER, demo, [], STEPS, 0, False, lines.append)

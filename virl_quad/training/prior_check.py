@@ -50,9 +50,9 @@ def teacher_trial(spec: RobotSpec, demo, tg: TGParams, steps: int, seed: int, ra
 
 
 def pick_carrying(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, seed: int, randomize: bool,
-                  log: Callable[[str], None] = print) -> tuple[TGParams, list[dict]]:
-    """The nearest finalist (``finalists``: nearest first) whose teacher falls in at most
-    :data:`MAX_FALL_RATE` of its episodes, else the one that falls least; and one row of
+                  log: Callable[[str], None] = print) -> tuple[int, list[dict]]:
+    """The index of the nearest finalist (``finalists``: nearest first) whose teacher falls in at
+    most :data:`MAX_FALL_RATE` of its episodes, else of the one that falls least; and one row of
     :func:`teacher_trial` figures (plus ``finalist``, its index) per finalist tried."""
     if not finalists:
         raise ValueError("no finalists to check")
@@ -64,8 +64,8 @@ def pick_carrying(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, 
             f"{tg.swing_height * 100:.1f} cm): its tracker fell in {row['falls']} of {row['episodes']} episodes, "
             f"mean travel {row['travel_m']:+.2f} m")
         if row["fall_rate"] <= MAX_FALL_RATE:
-            return tg, rows
+            return k, rows
     best = min(rows, key=lambda r: (r["fall_rate"], r["finalist"]))
     log(f"warning: every finalist's tracker fell in more than {MAX_FALL_RATE:.0%} of its episodes: this prior "
         f"cannot carry {spec.name}; going on with finalist {best['finalist']}, which falls least")
-    return finalists[best["finalist"]], rows
+    return best["finalist"], rows

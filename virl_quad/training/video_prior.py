@@ -22,9 +22,10 @@ like the demonstration video, found without the demonstration's reference motion
    duty factor of the best patterns, then speed and swing height, then each leg's offset
    in eighths.
 
-:func:`fit_tg_to_video` returns the fitted :class:`~virl_quad.policy.tg.TGParams`, the
-report (period, distance, candidates tried) and the fitted gait's silhouettes aligned with the
-video's, for a contact sheet (:func:`save_fit_sheet`).
+:func:`fit_tg_to_video` returns the nearest candidates (the finalists, as
+:class:`~virl_quad.policy.tg.TGParams`: the fit first, the others for
+:mod:`virl_quad.training.prior_check`), the report (period, distance, candidates tried) and
+each finalist's silhouettes aligned with the video's, for a contact sheet (:func:`save_fit_sheet`).
 """
 
 from __future__ import annotations
@@ -222,10 +223,11 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
     """Fit TG parameters to a demonstration video (T, 48, 48) uint8 at ``fps`` (Hz), the robot's
     control rate, seen by the env's camera.
 
-    Returns ``(params, report, fitted silhouettes (T, 48, 48) aligned with the video's)``; the report
-    holds ``period_frames``, ``periodicity``, ``distance`` (of the fit, gray levels / 255),
-    ``candidates`` (renders made), ``seconds`` and ``finalists`` (the best candidates, nearest first,
-    each with its parameters as ``tg``: :meth:`TGParams.to_dict`). ValueError
+    Returns ``(finalists, report, fitted)``: the best candidates' parameters, nearest first (the
+    fit: ``finalists[0]``), the report, and each finalist's silhouettes (F, T, 48, 48) aligned with
+    the video's. The report holds ``period_frames``, ``periodicity``, ``distance`` (of the nearest,
+    gray levels / 255), ``candidates`` (renders made), ``seconds`` and ``finalists`` (each one's
+    figures and its parameters as ``tg``: :meth:`TGParams.to_dict`). ValueError
     (one line) for a still video, one with no periodic motion, or one too short for two cycles."""
     t0 = time.time()
     raw = np.asarray(frames, dtype=np.float32) / 255.0
@@ -248,30 +250,13 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
         finalists = _search(scorer, template(spec), periods, fps, cfg)
     finally:
         synth.close()
-    best = finalists[0]
-    distance, shift, render = scorer.cost(best)
-    report = {"period_frames": period, "periodicity": periodicity, "distance": distance,
+    costs = [scorer.cost(p) for p in finalists]                                  # cached: no new renders
+    report = {"period_frames": period, "periodicity": periodicity, "distance": costs[0][0],
               "candidates": len(scorer.cache), "seconds": time.time() - t0,
               "finalists": [{"offsets": list(relative_offsets(p.offsets)), "frequency_hz": p.frequency, "duty": p.duty,
                              "step_length_m": p.step_length, "swing_height_m": p.swing_height,
-                             "distance": scorer.cost(p)[0], "tg": p.to_dict()} for p in finalists]}
-    return best, report, render[shift:shift + len(frames)]
-
-
-def render_aligned(frames: np.ndarray, spec: RobotSpec, params: TGParams) -> np.ndarray:
-    """The silhouettes (T, 48, 48) of ``params`` rendered kinematically and aligned, at the best
-    time shift within one cycle, with those of the video ``frames`` (T, 48, 48) at the robot's
-    control rate: the contact sheet of a finalist other than the nearest."""
-    video = silhouettes(frames)
-    synth = Synthesizer(spec)
-    try:
-        scorer = _Scorer(video, synth, int(math.ceil(spec.control_hz / params.frequency)))
-        _, shift, render = scorer.cost(params)
-    finally:
-        synth.close()
-    if render is None:
-        raise ValueError("the TG's feet are out of the robot's reach")
-    return render[shift:shift + len(video)]
+                             "distance": c[0], "tg": p.to_dict()} for p, c in zip(finalists, costs)]}
+    return finalists, report, np.stack([render[shift:shift + len(frames)] for _, shift, render in costs])
 
 
 def describe(params: TGParams, report: dict) -> str:
