@@ -389,3 +389,62 @@ def test_limits_are_the_ones_enforced(pupper):
         over = JointCommand(*(np.array(getattr(at, f)) for f in ("q_target", "kp", "kd", "tau_ff")))
         getattr(over, field)[0] += delta
         assert not is_safe_command(over, pupper, cfg), field
+
+
+class _Clock:
+    """A settable monotonic clock (s) for the ARM stamp window."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_an_arm_sent_before_an_estop_that_overtook_it_is_cancelled(pupper):
+    """PROTOCOL.md section 8: an ARM stamped no later than an E-stop received less than
+    arm_stamp_window s before it was sent before that E-stop: cancelled, in any later period;
+    an ARM stamped after it re-arms; the window bounds what a clock running ahead can block."""
+    clock = _Clock()
+    ctl = SafetyController(pupper, clock=clock)
+    ctl.estop("first")
+    ctl.tick(RobotState.standing(pupper))
+    t0 = 1_000_000_000_000
+    ctl.receive_estop(P.encode_json(MsgType.ESTOP, {"reason": "stop!"}, 9, stamp_ns=t0 + 5))
+    ctl.tick(RobotState.standing(pupper))
+    clock.t += 0.1                                  # the ARM arrives 0.1 s (five periods) later
+    for stamp in (t0, t0 + 5):                      # sent before the E-stop, or in the same ns
+        assert not ctl.receive_arm(P.encode_json(MsgType.ARM, {"robot_id": "pupper-01"}, 5, stamp_ns=stamp),
+                                   "pupper-01")
+        for _ in range(3):
+            ctl.begin_period()
+            ctl.tick(RobotState.standing(pupper))
+            assert ctl.mode == Mode.DAMPING
+    ev = ctl.status()["events"]
+    assert ev["arm_before_estop"] == 2 and ev["arm_cancelled"] == 2 and "arm" not in ev, ev
+    assert ctl.receive_arm(P.encode_json(MsgType.ARM, {"robot_id": "pupper-01"}, 6, stamp_ns=t0 + 6),
+                           "pupper-01")
+    ctl.begin_period()
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.RAMP
+    # a sender clock far ahead blocks ARMs for arm_stamp_window s, not longer
+    ctl.estop("again")
+    ctl.receive_estop(P.encode_json(MsgType.ESTOP, {}, 10, stamp_ns=t0 + 10**12))
+    ctl.tick(RobotState.standing(pupper))
+    late = P.encode_json(MsgType.ARM, {"robot_id": "pupper-01"}, 7, stamp_ns=t0 + 7)
+    clock.t += ctl.config.arm_stamp_window
+    assert not ctl.receive_arm(late, "pupper-01")
+    clock.t += 0.01
+    assert ctl.receive_arm(late, "pupper-01")
+
+
+def test_an_estop_that_does_not_decode_sets_no_stamp(pupper):
+    clock = _Clock()
+    ctl = SafetyController(pupper, clock=clock)
+    ctl.receive_estop(b"junk")
+    ctl.tick(RobotState.standing(pupper))
+    ctl.begin_period()
+    assert ctl.receive_arm(_arm(), "pupper-01")     # a later period, no stamp to compare with
+    ctl.begin_period()
+    ctl.tick(RobotState.standing(pupper))
+    assert ctl.mode == Mode.RAMP

@@ -1,6 +1,6 @@
 """Host-side safety layer: the only path from a policy's command to a motor.
 
-Pure logic, no Zenoh, no policy, no clock: the HAL's control loop calls
+Pure logic, no Zenoh, no policy: the HAL's control loop calls
 :meth:`SafetyController.tick` once per control period with the latest
 measured state and applies the :class:`JointCommand` it returns. Commands
 arrive through :meth:`SafetyController.receive` (raw protocol bytes) at any
@@ -20,16 +20,23 @@ E-stop and ARM requests are gathered per control period: a period opens at
 one). An E-stop cancels every ARM requested in its own period, before or after it in
 arrival order, and an ARM already taken at the start of its period: an E-stop always
 wins over every ARM received before it in the same period or earlier.
+
+Arrival order is not sending order: Zenoh lets an E-stop (highest priority) overtake an ARM
+sent before it. So an ARM message stamped (header ``stamp_ns``, the sender's clock) no later
+than an E-stop message received at most ``SafetyConfig.arm_stamp_window`` s before it is
+cancelled too. The senders' clocks can only refuse an ARM this way, never cause one; the window
+(on the controller's own monotonic clock) bounds what a sender's clock running ahead can block.
 """
 
 from __future__ import annotations
 
 import math
 import threading
+import time
 from collections import Counter
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -64,6 +71,7 @@ class SafetyConfig:
     gain_factor: float = 2.0           # kp, kd at most gain_factor x the spec gains
     damping_kd_factor: float = 1.0     # DAMPING kd = damping_kd_factor x spec kd (<= gain_factor)
     tilt_factor: float = 1.0           # fault beyond tilt_factor x spec max_roll / max_pitch
+    arm_stamp_window: float = 1.0      # s: an ARM stamped before an E-stop received this recently is cancelled
 
     def __post_init__(self) -> None:
         if self.ramp_time <= 0 or self.watchdog_periods < 1 or self.max_step <= 0:
@@ -72,6 +80,8 @@ class SafetyConfig:
             raise ValueError("damping_kd_factor must lie in [0, gain_factor]")
         if self.tilt_factor <= 0:
             raise ValueError("tilt_factor must be positive")
+        if self.arm_stamp_window < 0:
+            raise ValueError("arm_stamp_window must be >= 0")
 
 
 def roll_pitch(quat_xyzw: np.ndarray) -> tuple[float, float]:
@@ -116,9 +126,12 @@ CLAMPS: dict[str, str] = {
 class SafetyController:
     """State machine + command validator for one robot (see the module docstring)."""
 
-    def __init__(self, spec: Any, config: SafetyConfig = SafetyConfig()) -> None:
+    def __init__(self, spec: Any, config: SafetyConfig = SafetyConfig(),
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        """``clock`` (s, monotonic) times only the ``arm_stamp_window``."""
         self.spec = spec
         self.config = config
+        self._clock = clock
         self.mode = Mode.IDLE
         self.fault: str = ""                      # why the last DAMPING was entered
         self.ticks = 0                            # tick() calls so far
@@ -144,6 +157,8 @@ class SafetyController:
         self._estop_pending = ""                  # DAMPING at the next tick, with this fault text
         self._estop_in_period = False             # an E-stop arrived in the open period
         self._period_open = False                 # begin_period() was called since the last tick
+        self._estop_stamp = -1                    # ns, newest sender stamp of a decoded E-stop message
+        self._estop_rx = -math.inf                # s (clock), when the last decoded E-stop message arrived
 
     # ------------------------------------------------------------------ inputs (any thread)
 
@@ -179,11 +194,12 @@ class SafetyController:
         sample counts in ``events["estop_received"]``; one that does not decode as ESTOP also
         in ``rejected_other`` (``None``, a sample without payload such as a Zenoh DELETE, as
         ``estop:delete``). Never raises."""
-        reason = "estop"
+        reason, stamp = "estop", None
         try:
             if data is None:
                 raise ProtocolError("delete")
-            body = decode(data, expect=MsgType.ESTOP).body
+            msg = decode(data, expect=MsgType.ESTOP)
+            stamp, body = msg.stamp_ns, msg.body
             if isinstance(body, dict) and isinstance(body.get("reason"), str) and body["reason"]:
                 reason = f"estop: {body['reason'][:80]}"
         except ProtocolError as e:
@@ -191,17 +207,23 @@ class SafetyController:
                 self.rejected_other[f"estop:{e.reason}"] += 1
         with self._lock:
             self.events["estop_received"] += 1
+            if stamp is not None:              # ARMs stamped up to here were sent before it
+                self._estop_stamp = max(self._estop_stamp, stamp)
+                self._estop_rx = self._clock()
         self.estop(reason)
 
     def receive_arm(self, data: Any, robot_id: str) -> bool:
         """Handle a sample from the arm key: request re-arming only for a valid ARM message
         naming ``robot_id`` (counted in ``events["arm_received"]``, then see :meth:`arm`);
         anything else is counted in ``rejected_other`` (``arm:<reason>``, ``arm:wrong_robot``,
-        ``arm:delete`` for ``None``) and ignored. Never raises."""
+        ``arm:delete`` for ``None``) and ignored. An ARM stamped no later than an E-stop message
+        received within ``arm_stamp_window`` s was sent before it: cancelled
+        (``events["arm_cancelled"]`` and ``events["arm_before_estop"]``). Never raises."""
         try:
             if data is None:
                 raise ProtocolError("delete")
-            body = decode(data, expect=MsgType.ARM).body
+            msg = decode(data, expect=MsgType.ARM)
+            body = msg.body
         except ProtocolError as e:
             with self._lock:
                 self.rejected_other[f"arm:{e.reason}"] += 1
@@ -212,7 +234,7 @@ class SafetyController:
             return False
         with self._lock:
             self.events["arm_received"] += 1
-        return self.arm()
+            return self._request_arm(msg.stamp_ns)
 
     def estop(self, reason: str = "estop") -> None:
         """Request an emergency stop: DAMPING from the next tick on, latched until arm().
@@ -233,14 +255,22 @@ class SafetyController:
         (``events["arm_cancelled"]``). Re-arming resets the sequence baseline: a restarted
         policy may begin again from any sequence number."""
         with self._lock:
-            if self.mode in (Mode.RAMP, Mode.ACTIVE):
-                self.events["arm_ignored"] += 1
-                return False
-            if self._estop_in_period:
-                self.events["arm_cancelled"] += 1
-                return False
-            self._arm_requested = True
-            return True
+            return self._request_arm(None)
+
+    def _request_arm(self, stamp_ns: int | None) -> bool:
+        if self.mode in (Mode.RAMP, Mode.ACTIVE):
+            self.events["arm_ignored"] += 1
+            return False
+        if (stamp_ns is not None and stamp_ns <= self._estop_stamp
+                and self._clock() - self._estop_rx <= self.config.arm_stamp_window):
+            self.events["arm_before_estop"] += 1     # sent before an E-stop that overtook it
+            self.events["arm_cancelled"] += 1
+            return False
+        if self._estop_in_period:
+            self.events["arm_cancelled"] += 1
+            return False
+        self._arm_requested = True
+        return True
 
     def begin_period(self) -> bool:
         """Open a control period: ARMs of the closed period with no E-stop in it are taken,
