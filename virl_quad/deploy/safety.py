@@ -34,16 +34,17 @@ import math
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Callable
 
 import numpy as np
 
+from virl_quad.deploy.limits import (CLAMPS, SafetyConfig, command_error, is_safe_command, roll_pitch,
+                                     state_fault)
+from virl_quad.deploy.limits import limits as limits_of
 from virl_quad.deploy.protocol import NUM_JOINTS, JointCommand, MsgType, ProtocolError, RobotState, decode
-from virl_quad.robots.spec import MAX_TARGET_STEP
 
-_EPS = 1e-9
+__all__ = ["CLAMPS", "Mode", "SafetyConfig", "SafetyController", "is_safe_command", "roll_pitch"]
 
 
 def _copy(c: JointCommand) -> JointCommand:
@@ -59,68 +60,6 @@ class Mode(str, Enum):
     RAMP = "RAMP"
     ACTIVE = "ACTIVE"
     DAMPING = "DAMPING"
-
-
-@dataclass(frozen=True)
-class SafetyConfig:
-    """Tunables of the safety layer (the watchdog and the step limit count control periods)."""
-
-    ramp_time: float = 2.0             # s, from the current pose to the default pose
-    watchdog_periods: int = 3          # ACTIVE: more periods than this without a valid command -> DAMPING
-    max_step: float = MAX_TARGET_STEP  # rad per control period, change of an applied target (as in training)
-    gain_factor: float = 2.0           # kp, kd at most gain_factor x the spec gains
-    damping_kd_factor: float = 1.0     # DAMPING kd = damping_kd_factor x spec kd (<= gain_factor)
-    tilt_factor: float = 1.0           # fault beyond tilt_factor x spec max_roll / max_pitch
-    arm_stamp_window: float = 1.0      # s: an ARM stamped before an E-stop received this recently is cancelled
-
-    def __post_init__(self) -> None:
-        if self.ramp_time <= 0 or self.watchdog_periods < 1 or self.max_step <= 0:
-            raise ValueError("ramp_time, watchdog_periods and max_step must be positive")
-        if not 0 <= self.damping_kd_factor <= self.gain_factor:
-            raise ValueError("damping_kd_factor must lie in [0, gain_factor]")
-        if self.tilt_factor <= 0:
-            raise ValueError("tilt_factor must be positive")
-        if self.arm_stamp_window < 0:
-            raise ValueError("arm_stamp_window must be >= 0")
-
-
-def roll_pitch(quat_xyzw: np.ndarray) -> tuple[float, float]:
-    """Roll and pitch (rad, ZYX Euler) of a quaternion (x, y, z, w); normalises it first."""
-    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64) / np.linalg.norm(quat_xyzw)
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    return roll, pitch
-
-
-def is_safe_command(cmd: JointCommand, spec: Any, config: SafetyConfig = SafetyConfig(),
-                    prev: JointCommand | None = None) -> bool:
-    """True if ``cmd`` may reach a motor: finite, 12 values each, targets within the joint
-    limits, 0 <= kp, kd <= gain_factor x spec gains, |tau_ff| <= torque limit, and (if
-    ``prev`` is given) no target moved more than ``config.max_step`` rad since ``prev``."""
-    try:
-        arrays = [np.asarray(a, dtype=np.float64) for a in (cmd.q_target, cmd.kp, cmd.kd, cmd.tau_ff)]
-    except (TypeError, ValueError):
-        return False
-    if any(a.shape != (NUM_JOINTS,) or not np.all(np.isfinite(a)) for a in arrays):
-        return False
-    q, kp, kd, tau = arrays
-    ok = (np.all(q >= spec.joint_lower - _EPS) and np.all(q <= spec.joint_upper + _EPS)
-          and np.all(kp >= 0) and np.all(kp <= config.gain_factor * spec.kp + _EPS)
-          and np.all(kd >= 0) and np.all(kd <= config.gain_factor * spec.kd + _EPS)
-          and np.all(np.abs(tau) <= spec.torque_limit + _EPS))
-    if ok and prev is not None:
-        ok = bool(np.all(np.abs(q - np.asarray(prev.q_target)) <= config.max_step + _EPS))
-    return bool(ok)
-
-
-#: What each ``clamped`` counter of STATUS means: an accepted command the safety layer changed
-#: before applying it, by kind (one count per command, however many joints it touched).
-CLAMPS: dict[str, str] = {
-    "q_limit": "a joint target outside the joint limits, clipped to them",
-    "q_step": "a joint target too far from the last applied one, moved at most max_step (rad) per period",
-    "gain": "kp or kd above the allowed maximum, lowered to it",
-    "tau_ff": "a feed-forward torque above the motor's limit (N·m), clipped",
-}
 
 
 class SafetyController:
@@ -175,7 +114,7 @@ class SafetyController:
 
     def receive_command(self, cmd: JointCommand, seq: int) -> bool:
         """Validate an already-decoded command (in-process policies use this). Never raises."""
-        reason = self._content_error(cmd)
+        reason = command_error(cmd)
         if reason is None and (isinstance(seq, bool) or not isinstance(seq, (int, np.integer)) or seq < 0):
             reason = "bad_seq"
         with self._lock:
@@ -312,7 +251,7 @@ class SafetyController:
                 self._ramp_k = 0
                 self._ramp_start = q_meas
             if self.mode in (Mode.RAMP, Mode.ACTIVE):
-                fault = self._state_fault(state)
+                fault = state_fault(state, self.spec, self.config)
                 if fault:
                     self._enter_damping(fault, fault)
             self._since_valid = 0 if pending is not None else self._since_valid + 1
@@ -371,39 +310,6 @@ class SafetyController:
 
     # ------------------------------------------------------------------ helpers
 
-    def _content_error(self, cmd: JointCommand) -> str | None:
-        try:
-            arrays = [np.asarray(a, dtype=np.float64) for a in (cmd.q_target, cmd.kp, cmd.kd, cmd.tau_ff)]
-        except (TypeError, ValueError, AttributeError):
-            return "bad_shape"
-        if any(a.shape != (NUM_JOINTS,) for a in arrays):
-            return "bad_shape"
-        if not all(np.all(np.isfinite(a)) for a in arrays):
-            return "non_finite"
-        if np.any(arrays[1] < 0) or np.any(arrays[2] < 0):
-            return "negative_gain"
-        return None
-
-    def _state_fault(self, state: RobotState | None) -> str:
-        if state is None:
-            return "no_state"
-        try:
-            q = np.asarray(state.q, dtype=np.float64)
-            quat = np.asarray(state.quat, dtype=np.float64)
-            if q.shape != (NUM_JOINTS,) or quat.shape != (4,):
-                return "bad_state"
-            if not (np.all(np.isfinite(q)) and np.all(np.isfinite(state.dq)) and np.all(np.isfinite(quat))):
-                return "bad_state"
-            if not 0.5 < float(np.linalg.norm(quat)) < 1.5:
-                return "bad_state"
-            roll, pitch = roll_pitch(quat)
-        except (TypeError, ValueError, AttributeError):
-            return "bad_state"
-        tf = self.config.tilt_factor
-        if abs(roll) > tf * self.spec.max_roll or abs(pitch) > tf * self.spec.max_pitch:
-            return "tilt"
-        return ""
-
     def _enter_damping(self, fault: str, event: str) -> None:
         if self.mode != Mode.DAMPING:
             self.fault = fault
@@ -430,20 +336,8 @@ class SafetyController:
         return JointCommand(np.array(q, dtype=np.float64), np.zeros(NUM_JOINTS), kd, np.zeros(NUM_JOINTS))
 
     def limits(self) -> dict[str, Any]:
-        """The limits this controller enforces, JSON-ready (the ANNOUNCE's ``limits`` member):
-        joint limits (rad), maximum gains (N·m/rad, N·m·s/rad), torque limit (N·m), maximum
-        target step (rad per control period), watchdog (control periods), tilt limits (rad),
-        the DAMPING gain (N·m·s/rad) and the RAMP time (s)."""
-        s, c = self.spec, self.config
-        as_list = lambda a: np.asarray(a, dtype=np.float64).tolist()  # noqa: E731
-        return {
-            "q_lower": as_list(s.joint_lower), "q_upper": as_list(s.joint_upper),
-            "kp_max": as_list(c.gain_factor * np.asarray(s.kp)), "kd_max": as_list(c.gain_factor * np.asarray(s.kd)),
-            "tau_max": as_list(s.torque_limit), "max_step": float(c.max_step),
-            "watchdog_periods": int(c.watchdog_periods),
-            "max_roll": float(c.tilt_factor * s.max_roll), "max_pitch": float(c.tilt_factor * s.max_pitch),
-            "damping_kd": as_list(c.damping_kd_factor * np.asarray(s.kd)), "ramp_time": float(c.ramp_time),
-        }
+        """The limits this controller enforces, JSON-ready (see :func:`virl_quad.deploy.limits.limits`)."""
+        return limits_of(self.spec, self.config)
 
     def status(self) -> dict[str, Any]:
         """Counters and mode, JSON-ready: the body of a STATUS message."""
