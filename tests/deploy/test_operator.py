@@ -1,20 +1,22 @@
-"""The operator's STATUS view: what a person reads, from a real safety layer and a real HAL."""
+"""The operator's STATUS view and answers: what a person reads, from a real safety layer and a real HAL."""
 
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
+import zenoh
 
 from virl_quad import robots
 from virl_quad.deploy import protocol as P
 from hil_harness import start_hal
-from virl_quad.deploy.operator import format_status
-from virl_quad.deploy.protocol import JointCommand, RobotState
+from virl_quad.deploy.operator import format_status, wait_until
+from virl_quad.deploy.protocol import JointCommand, MsgType, RobotState
 from virl_quad.deploy.safety import CLAMPS, Mode, SafetyConfig, SafetyController
-from virl_quad.deploy.zenoh_config import free_port
+from virl_quad.deploy.zenoh_config import free_port, load_config, publisher_options
 
 SPEC = robots.get("pupper")
 
@@ -65,3 +67,33 @@ def test_operator_status_against_a_real_hal(tmp_path) -> None:
     assert raw.returncode == 0, raw.stderr[-2000:]
     body = json.loads(raw.stdout.strip().splitlines()[-1])
     assert body["mode"] == "IDLE" and body["robot_id"] == robot_id and body["control_dt"] == SPEC.control_dt
+
+
+def test_operator_arm_says_why_the_hal_did_not_take_it() -> None:
+    """A HAL in RAMP ignores an ARM; an ARM stamped before an E-stop (here: one stamped an hour
+    ahead, as from a clock running ahead) is cancelled. The operator exits 1 and says why."""
+    ep, robot_id = f"tcp/127.0.0.1:{free_port()}", "pupper-arm"
+    hal = start_hal(ep, robot_id, "--status-hz", "20", "--arm")
+    base = [sys.executable, "-m", "virl_quad.deploy.operator", "arm", "--robot-id", robot_id,
+            "--connect", ep, "--wait", "5"]
+    try:
+        ignored = subprocess.run(base, capture_output=True, text=True, timeout=120)
+        with zenoh.open(load_config("peer", listen=[], connect=[ep])) as s:
+            ahead = time.time_ns() + 3600 * 10**9
+            pub = s.declare_publisher(P.key(robot_id, "estop"), **publisher_options("estop"))
+            assert wait_until(lambda: pub.matching_status.matching, 30.0)
+            operator = subprocess.Popen(base, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            k = 1
+            while operator.poll() is None:         # E-stops every 0.2 s: one is always < 1 s old
+                pub.put(P.encode_json(MsgType.ESTOP, {"reason": "test"}, k, stamp_ns=ahead + k))
+                k += 1
+                time.sleep(0.2)
+            out, err = operator.communicate(timeout=60)
+            pub.undeclare()
+        before = subprocess.CompletedProcess(base, operator.returncode, out, err)
+    finally:
+        hal.close()
+    assert ignored.returncode == 1 and "ARM not taken: the HAL is already in RAMP or ACTIVE" in ignored.stderr, \
+        ignored.stderr[-2000:]
+    assert before.returncode == 1 and "ARM not taken: it was sent before an E-stop" in before.stderr, \
+        before.stderr[-2000:]

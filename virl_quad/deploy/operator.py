@@ -197,6 +197,24 @@ def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
     return show
 
 
+#: Why the HAL did not take an ARM, by the STATUS event that counted it (most specific first).
+_NOT_ARMED: tuple[tuple[str, str], ...] = (
+    ("arm_before_estop", "it was sent before an E-stop that the HAL received up to 1 s earlier (or this "
+                         "machine's clock is behind the E-stop sender's); send it again"),
+    ("arm_cancelled", "an E-stop arrived in the same control period"),
+    ("arm_ignored", "the HAL is already in RAMP or ACTIVE"),
+)
+
+
+def _why_not_armed(before: dict, after: dict) -> str:
+    """The reason an ARM was not taken, read from the STATUS events before and after it."""
+    b, a = before.get("events", {}), after.get("events", {})
+    for event, why in _NOT_ARMED:
+        if a.get(event, 0) > b.get(event, 0):
+            return why
+    return "no STATUS showed it taken in time (wrong robot id, or not allowed to arm under the secure config?)"
+
+
 def main(config: OperatorConfig) -> int:
     """Run one operator command; 0 if the HAL confirmed it in STATUS, 1 if not."""
     if config.action not in ACTIONS:
@@ -217,6 +235,8 @@ def main(config: OperatorConfig) -> int:
                 n = before.get("events", {}).get("arm", 0)
                 st = op.wait_status(lambda s: s.get("events", {}).get("arm", 0) > n, config.wait)
                 ok = st.get("events", {}).get("arm", 0) > n
+                if not ok:
+                    print(f"ARM not taken: {_why_not_armed(before, st)}", file=sys.stderr)
             elif config.action == "estop":
                 op.estop(config.reason)
                 st = op.wait_status(lambda s: s.get("mode") == "DAMPING", config.wait)
