@@ -236,6 +236,7 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         torch.set_num_threads(1)
     demo, env, runner = build(args, run_dir, data)
     from virl_quad.envs.workers import EnvWorkerLost   # loaded by build with the envs
+    from virl_quad.training.report import RunLog
 
     log = RunLog(run_dir / "train.log")
     log(f"virl_quad.train: robot={args.run.robot} demo={args.run.demo} reward={args.run.reward} "
@@ -329,19 +330,6 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
         log(f"the first {args.ppo.critic_warmup} iterations fit the critic alone (actor frozen)")
 
 
-class RunLog:
-    """Progress lines on stdout and appended to the run's ``train.log``."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def __call__(self, line: str) -> None:
-        """Print ``line`` and append it to the log file."""
-        print(line, flush=True)
-        with open(self.path, "a") as f:
-            f.write(line + "\n")
-
-
 def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dict:
     """The run's ground-truth evaluation of ``policy`` (obs dict -> action); ``actions``: the env
     options of its action space (the run's contract; None: the defaults, 12 offsets from the
@@ -353,21 +341,13 @@ def _evaluate(args: TrainArgs, demo, policy, actions: dict | None = None) -> dic
                     **(actions or {}))
 
 
-def _alignment_curve(path: Path) -> list[list[float]]:
-    """[[iteration, env steps, rank correlation], ...] of the run's evaluations that probed it."""
-    if not path.exists():
-        return []
-    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    return [[r["iteration"], r.get("env_steps", 0), r["reward_alignment"]] for r in rows if "reward_alignment" in r]
-
-
 def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
 def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     """Final evaluation, report.json, the exported policy (policy.pt) and the side-by-side video."""
-    from virl_quad.training.report import side_by_side_video, write_report
+    from virl_quad.training.report import alignment_curve, side_by_side_video, write_report
     from virl_quad.training.runner import actor_policy, eval_summary
 
     policy = actor_policy(runner.alg.get_policy().eval())
@@ -384,7 +364,7 @@ def finish(args: TrainArgs, run_dir: Path, demo, runner, log=print) -> None:
     model = getattr(runner.reward_source, "model", None)
     if runner.alignment_probe is not None and model is not None:
         report["reward_alignment"] = {**runner.alignment_probe.probe(model),
-                                      "curve": _alignment_curve(run_dir / "evaluations.jsonl")}
+                                      "curve": alignment_curve(run_dir / "evaluations.jsonl")}
     write_report(run_dir / "report.json", report)
     if final:
         summary = eval_summary({**final, "episodes_run": len(final.get("episodes", [])),

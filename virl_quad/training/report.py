@@ -1,4 +1,5 @@
-"""End-of-run artefacts: ``report.json`` and a side-by-side video (demonstration | agent)."""
+"""A run's artefacts: its log, ``report.json``, the alignment curve and a side-by-side video
+(demonstration | agent)."""
 
 from __future__ import annotations
 
@@ -69,3 +70,24 @@ def _jsonable(x):
     if isinstance(x, np.ndarray):
         return x.tolist()
     return str(x)
+
+
+class RunLog:
+    """Progress lines on stdout and appended to the run's ``train.log``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __call__(self, line: str) -> None:
+        """Print ``line`` and append it to the log file."""
+        print(line, flush=True)
+        with open(self.path, "a") as f:
+            f.write(line + "\n")
+
+
+def alignment_curve(path: Path) -> list[list[float]]:
+    """[[iteration, env steps, rank correlation], ...] of the run's evaluations that probed it."""
+    if not path.exists():
+        return []
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [[r["iteration"], r.get("env_steps", 0), r["reward_alignment"]] for r in rows if "reward_alignment" in r]
