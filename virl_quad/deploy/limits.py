@@ -120,10 +120,10 @@ def state_fault(state: RobotState | None, spec: Any, config: SafetyConfig) -> st
 
 
 def limits(spec: Any, config: SafetyConfig) -> dict[str, Any]:
-    """The limits a safety layer with ``config`` enforces on ``spec``'s robot, JSON-ready (the ANNOUNCE's ``limits`` member):
-    joint limits (rad), maximum gains (N·m/rad, N·m·s/rad), torque limit (N·m), maximum
-    target step (rad per control period), watchdog (control periods), tilt limits (rad),
-    the DAMPING gain (N·m·s/rad) and the RAMP time (s)."""
+    """The limits a safety layer with ``config`` enforces on ``spec``'s robot, JSON-ready (the
+    ANNOUNCE's ``limits`` member): joint limits (rad), maximum gains (N·m/rad, N·m·s/rad),
+    torque limit (N·m), maximum target step (rad per control period), watchdog (control
+    periods), tilt limits (rad), the DAMPING gain (N·m·s/rad) and the RAMP time (s)."""
     s, c = spec, config
     as_list = lambda a: np.asarray(a, dtype=np.float64).tolist()  # noqa: E731
     return {
