@@ -199,7 +199,7 @@ def _shower(as_json: bool, op: Operator) -> Callable[[dict[str, Any]], None]:
 
 #: Why the HAL did not take an ARM, by the STATUS event that counted it (most specific first).
 _NOT_ARMED: tuple[tuple[str, str], ...] = (
-    ("arm_before_estop", "it was sent before an E-stop that the HAL received up to 1 s earlier (or this "
+    ("arm_before_estop", "it was sent before an E-stop that the HAL received just before it (or this "
                          "machine's clock is behind the E-stop sender's); send it again"),
     ("arm_cancelled", "an E-stop arrived in the same control period"),
     ("arm_ignored", "the HAL is already in RAMP or ACTIVE"),

@@ -96,7 +96,7 @@ class SafetyController:
         self._estop_pending = ""                  # DAMPING at the next tick, with this fault text
         self._estop_in_period = False             # an E-stop arrived in the open period
         self._period_open = False                 # begin_period() was called since the last tick
-        self._estop_stamp = -1                    # ns, newest sender stamp of a decoded E-stop message
+        self._estop_stamp = -1                    # ns, largest sender stamp of any decoded E-stop message
         self._estop_rx = -math.inf                # s (clock), when the last decoded E-stop message arrived
 
     # ------------------------------------------------------------------ inputs (any thread)
