@@ -146,3 +146,39 @@ def test_env_draws_the_demonstration_ground_and_refuses_another() -> None:
     env.close()
     with pytest.raises(ValueError, match="ground"):
         make("pupper", demo=plain, ground="checker")
+
+
+def test_forward_speed_follows_the_heading_not_the_world_axes() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from virl_quad.envs.quadruped import forward_speed, speed_reward
+
+    yaw90 = Rotation.from_euler("z", np.pi / 2).as_quat()
+    assert forward_speed(yaw90, np.array([0.0, 0.3, 0.0])) == pytest.approx(0.3)
+    assert forward_speed(yaw90, np.array([0.3, 0.0, 0.0])) == pytest.approx(0.0, abs=1e-12)
+    pitched = Rotation.from_euler("zy", [np.pi, 0.3]).as_quat()     # turned back, nose down
+    assert forward_speed(pitched, np.array([0.2, 0.0, 0.5])) == pytest.approx(-0.2)
+    assert speed_reward(0.2, 0.2) == 1.0 and speed_reward(0.0, 0.2) == pytest.approx(np.exp(-1.0))
+
+
+def test_oracle_reward_mixes_the_score_with_the_forward_speed_term() -> None:
+    from virl_quad import demo as demo_lib
+    from virl_quad.envs.quadruped import forward_speed, speed_reward
+    from virl_quad.evaluation.score import reference_trajectory
+
+    demo = demo_lib.load("trot", "pupper")
+    envs = [make("pupper", demo=demo, oracle_reward=True, oracle_speed_weight=w, render=False) for w in (0.0, 0.4)]
+    for env in envs:
+        env.reset(seed=3)
+    for _ in range(15):
+        (_, score, *_), (_, mixed, *_) = (env.step(np.zeros(12)) for env in envs)
+    env = envs[1]
+    ref = reference_trajectory(demo.motion, np.array([env.demo_step / demo.fps]), env._kin)
+    s = env.world.state()
+    term = speed_reward(forward_speed(s.base_quat, s.base_lin_vel), forward_speed(ref.root_quat[0], ref.root_lin_vel[0]))
+    assert mixed == pytest.approx(0.6 * score + 0.4 * term, rel=1e-9)
+    assert abs(mixed - score) > 1e-3                      # the term changes the reward
+    for env in envs:
+        env.close()
+    with pytest.raises(ValueError, match="oracle_speed_weight"):
+        make("pupper", demo=demo, oracle_reward=True, oracle_speed_weight=1.5)

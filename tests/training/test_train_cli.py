@@ -182,6 +182,8 @@ def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     (["--warm-start-steps", "0"], "--warm-start-steps"),
     (["--critic-warmup", "-2"], "--critic-warmup"),
     (["--prior-pull", "1"], "--prior-pull"),
+    (["--oracle-speed-weight", "1.5"], "--oracle-speed-weight"),
+    (["--oracle-speed-weight", "nan"], "--oracle-speed-weight"),
 ])
 def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
     p = run("virl_quad.train", *TINY, "--iterations", "1", "--run-dir", str(tmp_path / "r"), *args)   # args last: they win

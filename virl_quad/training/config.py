@@ -31,6 +31,10 @@ class RunOptions:
         "reward: virl (default), the paper's baselines frame/sequence/no_ae/gaifo, oracle (ground-truth "
         "pose reward, an upper bound) or prior (1 per step alive, no imitation: what the gait prior and "
         "warm start give alone)", choices=REWARDS)
+    oracle_speed_weight: float = opt(0.3,
+        "with --reward oracle: share of the reward paid for matching the reference's forward speed, "
+        "exp(-(dv / 0.2 m/s)^2); the rest is the ground-truth score, whose own speed term barely tells "
+        "a gait drifting backwards from one walking forwards (0: the score alone)")
     minutes: float = opt(18.0,
         "wall-clock budget in minutes from the start of the command to the end of training (prior fit, "
         "warm start and PPO; 0: none, run all iterations); the final evaluation, export and video follow,"
@@ -177,6 +181,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"--critic-learning-rate must lie in [0, 1], got {args.ppo.critic_learning_rate}")
     if not (0 <= args.ppo.prior_pull < 1 or args.ppo.prior_pull == -1):
         raise ValueError(f"--prior-pull must lie in [0, 1) or be -1 (auto), got {args.ppo.prior_pull}")
+    if not 0 <= args.run.oracle_speed_weight <= 1:
+        raise ValueError(f"--oracle-speed-weight must lie in [0, 1], got {args.run.oracle_speed_weight}")
     if not 0 < args.ppo.init_std <= 2:
         raise ValueError(f"--init-std must lie in (0, 2] action units, got {args.ppo.init_std}")
     for name in ("num_envs", "iterations", "steps_per_env", "save_every", "warm_start_steps"):
