@@ -41,7 +41,7 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 #: Options added after runs were made, with the value that reproduces those runs on resume. Saved
 #: options that no longer exist (retired features) are dropped on resume.
-LEGACY: dict[str, object] = {"tg": False}
+LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:

@@ -123,3 +123,13 @@ def test_the_anchor_pull_by_default_guards_every_reward_but_the_exact_one():
     assert prior_pull(TrainArgs.make(reward="oracle")) == 0.0
     assert prior_pull(TrainArgs.make(reward="oracle", prior_pull=0.05)) == 0.05
     assert prior_pull(TrainArgs.make(prior_pull=0.0)) == 0.0
+
+
+def test_runs_made_before_the_oracle_speed_term_resume_with_the_score_alone() -> None:
+    from virl_quad.train import LEGACY
+    from virl_quad.training.config import from_dict, to_dict
+
+    old = {k: v for k, v in to_dict(TrainArgs.make(reward="oracle")).items() if k != "oracle_speed_weight"}
+    assert from_dict({**LEGACY, **old}).run.oracle_speed_weight == 0.0      # what resume reads back
+    new = to_dict(TrainArgs.make(reward="oracle"))
+    assert from_dict({**LEGACY, **new}).run.oracle_speed_weight == 0.3      # a new run keeps its own
