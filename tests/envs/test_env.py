@@ -175,7 +175,8 @@ def test_oracle_reward_mixes_the_score_with_the_forward_speed_term() -> None:
     env = envs[1]
     ref = reference_trajectory(demo.motion, np.array([env.demo_step / demo.fps]), env._kin)
     s = env.world.state()
-    term = speed_reward(forward_speed(s.base_quat, s.base_lin_vel), forward_speed(ref.root_quat[0], ref.root_lin_vel[0]))
+    v, v_ref = forward_speed(s.base_quat, s.base_lin_vel), forward_speed(ref.root_quat[0], ref.root_lin_vel[0])
+    term = speed_reward(v, v_ref)
     assert mixed == pytest.approx(0.6 * score + 0.4 * term, rel=1e-9)
     assert abs(mixed - score) > 1e-3                      # the term changes the reward
     for env in envs:

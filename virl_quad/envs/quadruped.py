@@ -162,11 +162,9 @@ def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, ActionMap]:
 
 
 def forward_speed(quat: np.ndarray, lin_vel: np.ndarray) -> float:
-    """Base velocity (m/s, world frame) along the base's heading: its x axis projected on the ground."""
-    x, y, z, w = quat
-    heading = np.array([1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z)])   # first column of R, xy
-    norm = float(np.linalg.norm(heading))
-    return float(lin_vel[:2] @ heading / norm) if norm > 1e-9 else 0.0
+    """Base velocity (m/s, world frame) along the base's heading (its yaw, the x axis on the ground)."""
+    h = obs_lib.yaw(quat)
+    return float(lin_vel[0] * np.cos(h) + lin_vel[1] * np.sin(h))
 
 
 def speed_reward(v: float, v_ref: float) -> float:
