@@ -41,7 +41,7 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 #: Options added after runs were made, with the value that reproduces those runs on resume. Saved
 #: options that no longer exist (retired features) are dropped on resume.
-LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0}
+LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0, "video_speed_weight": 0.0}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
@@ -200,7 +200,8 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         dist = args.distance
         source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, dist.reward_updates, args.run.seed,
                                args.run.device, lr=dist.reward_lr, cyclic=demo.loop, w_d=dist.reward_wd,
-                               other_clips=_other_clips(args, run_dir), adversarial_weight=dist.adversarial_weight)
+                               other_clips=_other_clips(args, run_dir), adversarial_weight=dist.adversarial_weight,
+                               fps=demo.fps, video_speed_weight=dist.video_speed_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
@@ -254,6 +255,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
                 _reanchor(args, runner, log)
         log(f"demonstration: {demo.source or args.run.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
+        if getattr(runner.reward_source, "speed_note", ""):
+            log(runner.reward_source.speed_note)
         if not runner.standing and demo.motion is not None:
             from virl_quad.evaluate import zero_policy
 

@@ -98,9 +98,15 @@ def background_levels(frames: np.ndarray) -> np.ndarray:
     of a render; none for a textured background), and every level within :data:`TOLERANCE` of
     one. int64 array, sorted."""
     frames = np.asarray(frames, dtype=np.uint8)
+    return flat_levels(frames[:, :BORDER_ROWS], frames[:, -BORDER_ROWS:])
+
+
+def flat_levels(*strips: np.ndarray) -> np.ndarray:
+    """The gray levels filling at least :data:`BACKGROUND_SHARE` of any of the uint8 ``strips``
+    (rows of a video), each widened by :data:`TOLERANCE`. int64 array, sorted (empty: none)."""
     levels: set[int] = set()
-    for rows in (frames[:, :BORDER_ROWS], frames[:, -BORDER_ROWS:]):
-        counts = np.bincount(rows.reshape(-1), minlength=256)
+    for rows in strips:
+        counts = np.bincount(np.asarray(rows, dtype=np.uint8).reshape(-1), minlength=256)
         levels.update(int(v) for v in np.flatnonzero(counts >= BACKGROUND_SHARE * rows.size))
     if not levels:
         return np.zeros(0, np.int64)

@@ -102,6 +102,12 @@ class DistanceOptions:
         "sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): "
         "higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves "
         "every behaviour rewarded alike")
+    video_speed_weight: float = opt(0.3,
+        "share of a learned reward paid for travelling as fast as the demonstration: the ground's slide "
+        "behind the followed robot, measured alike in the demonstration's and the agent's frames, "
+        "exp(-((v - v_demo) / |v_demo|)^2). The distance model paints the ground out and cannot see "
+        "travel; without this a gait that drifts backwards scores as one that walks. Needs a patterned "
+        "ground (--ground checker): off, with a line, where the demonstration shows none. 0: none")
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
         "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")
@@ -196,6 +202,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --prior-from {args.prior.prior_from!r}; choose one of: {', '.join(PRIOR_SOURCES)}")
     if args.env.ground not in GROUNDS:
         raise ValueError(f"unknown --ground {args.env.ground!r}; choose one of: {', '.join(GROUNDS)}")
+    if not 0 <= args.distance.video_speed_weight <= 1:
+        raise ValueError(f"--video-speed-weight must lie in [0, 1], got {args.distance.video_speed_weight}")
     if args.distance.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.distance.adversarial_weight}")
     if args.run.minutes < 0 or args.env.episode_seconds <= 0 or args.eval.eval_seconds <= 0:

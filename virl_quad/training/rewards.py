@@ -6,7 +6,9 @@ returns the rollout's rewards [T, N] (``finish``):
 - :class:`LearnedReward`: the VIRL distance or one of its baselines/ablations
   (``virl``, ``frame``, ``sequence``, ``no_ae``, ``gaifo``): stores the rollout's
   agent/expert frames in the distance model's dataset, runs M updates, then
-  recomputes every reward of the rollout with the updated model;
+  recomputes every reward of the rollout with the updated model; a share of it
+  (``video_speed_weight``) pays for travelling as fast as the demonstration, the
+  ground's slide measured in both videos (:mod:`virl_quad.reward.egomotion`);
 - :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
   pose-imitation reward, the upper bound of the comparison);
 - :class:`SurvivalReward`: 1 per step the robot is up (``prior``: no imitation reward at all,
@@ -22,6 +24,7 @@ import torch
 from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
+from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, ground_levels
 
 
 def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -41,10 +44,14 @@ class LearnedReward:
 
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
-                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0) -> None:
+                 cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
+                 fps: float = 50.0, video_speed_weight: float = 0.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig.make(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
+        self.speed, self.speed_weight, self.speed_note = None, float(video_speed_weight), ""
+        if self.speed_weight > 0:
+            self.speed, self.speed_note = _speed_term(demo_frames, fps, num_envs, self.speed_weight)
         self.updates = updates
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
@@ -71,6 +78,13 @@ class LearnedReward:
         # weights); envs whose episode ended on the last step start fresh.
         rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
+        if self.speed is not None:
+            r_speed, valid, shift = self.speed.rollout(agent, dones)
+            w = self.speed_weight
+            rewards = torch.where(valid.to(rewards.device), (1 - w) * rewards + w * r_speed.to(rewards.device), rewards)
+            if bool(valid.any()):
+                info["video_speed/ratio"] = float(shift[valid].mean()) / self.speed.target
+                info["video_speed/reward"] = float(r_speed[valid].mean())
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
@@ -82,6 +96,18 @@ class LearnedReward:
     def load_state_dict(self, d: dict) -> None:
         """Restore the distance model and optimiser (an older version's rollout count is ignored)."""
         self.model.load_state_dict(d)
+
+
+def _speed_term(demo_frames: np.ndarray, fps: float, num_envs: int, weight: float) -> tuple[VideoSpeedTerm | None, str]:
+    """The video speed term for a demonstration, or None, with a line saying which and why."""
+    levels = ground_levels(demo_frames)
+    target = clip_speed(demo_frames, fps, levels)
+    if target is None:
+        return None, ("video speed term off: the demonstration shows no patterned ground to measure its "
+                      "travel by (render it on the checker ground)")
+    term = VideoSpeedTerm(target, fps, levels, num_envs)
+    return term, (f"video speed term: {weight:g} of the reward for the ground's slide, {target:+.2f} px per "
+                  f"{term.k} frames in the demonstration (negative: forwards)")
 
 
 class EnvReward:

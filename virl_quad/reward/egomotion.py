@@ -1,0 +1,169 @@
+"""How fast the subject of a follow-camera video travels, from the pixels alone.
+
+The follow camera keeps the robot in the middle of the frame, so its travel shows only in
+the ground sliding past behind it. The distance model cannot see that: it paints the
+ground out (:func:`virl_quad.reward.frames.paint`), since the pattern's phase says where
+the robot stands rather than how it moves. A silhouette walking in place and one walking
+forwards look alike to it, and a gait that drifts backwards is rewarded as one that walks.
+
+This module measures the ground's slide instead: between two frames ``k`` steps apart, the
+shift (px) that best maps the earlier frame's ground pixels onto the later frame's, by a
+masked sum of squared differences over integer shifts (the ground blurred first so that
+the cost is smooth) and a parabola through the best one for the sub-pixel part. The same
+estimator runs on the demonstration and on the agent's frames, so its scale (px per m,
+which perspective varies by row) cancels in their comparison. It needs a ground with a
+pattern the camera sees (the ``checker`` ground); on a plain ground or a textured video
+background there is nothing to measure, and :func:`clip_speed` says so (None).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from virl_quad.reward.frames import BORDER_ROWS, flat_levels
+
+WINDOW_S = 0.16      # s between the two frames compared (8 steps at Pupper's 50 Hz)
+MAX_DX = 8           # px, largest horizontal shift searched (the checker's period is ~20 px)
+MAX_DY = 1           # px, vertical shifts searched too (the camera follows the base's bob)
+BLUR_SIGMA = 1.0     # px, Gaussian blur of the ground before matching
+MIN_PIXELS = 50      # ground pixels two frames must share for a shift to count
+MIN_VALID = 0.5      # share of a clip's frame pairs that must give a shift for a clip speed
+MIN_CONTRAST = 0.2   # relative rise of the cost away from its best shift: below, no pattern to see
+
+
+def window_steps(fps: float) -> int:
+    """Frames between the two frames compared, :data:`WINDOW_S` at ``fps`` (at least 2)."""
+    return max(2, int(round(WINDOW_S * float(fps))))
+
+
+def ground_levels(frames: np.ndarray) -> np.ndarray:
+    """The gray levels of a video's ground (T, H, W) uint8: the flat levels of its bottom rows
+    (:func:`~virl_quad.reward.frames.flat_levels`), the sky left out. int64, sorted."""
+    return flat_levels(np.asarray(frames, dtype=np.uint8)[:, -BORDER_ROWS:])
+
+
+def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Masked Gaussian blur of [M, H, W]: the ground's gray levels smoothed over ground pixels
+    only, and where that blur rests on ground alone."""
+    r = int(np.ceil(3 * BLUR_SIGMA))
+    t = torch.arange(-r, r + 1, dtype=torch.float32)
+    g = torch.exp(-t.square() / (2 * BLUR_SIGMA ** 2))
+    g = g / g.sum()
+
+    def conv(z: torch.Tensor) -> torch.Tensor:
+        z = F.conv2d(F.pad(z[:, None], (r, r, 0, 0), mode="replicate"), g.view(1, 1, 1, -1))
+        return F.conv2d(F.pad(z, (0, 0, r, r), mode="replicate"), g.view(1, 1, -1, 1))[:, 0]
+
+    m = mask.to(torch.float32)
+    weight = conv(m)
+    return conv(x * m) / weight.clamp(min=1e-6), weight > 0.95
+
+
+def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.Tensor,
+                 levels: np.ndarray) -> torch.Tensor:
+    """Horizontal shift (px, float32 [M]) of the ground from ``earlier`` to ``later`` frames
+    ([M, H, W] uint8, pairwise): positive when it slides right (the subject of a camera looking
+    from its right side moves left, backwards). NaN where the two frames share too little
+    ground or the ground shows no pattern."""
+    a = torch.as_tensor(np.asarray(earlier), dtype=torch.int64)
+    b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
+    if a.shape != b.shape or a.ndim != 3:
+        raise ValueError(f"expected two [M, H, W] frame stacks of one shape, got {list(a.shape)}, {list(b.shape)}")
+    lv = torch.as_tensor(levels, dtype=torch.int64)
+    fa, ma = _blur(a.to(torch.float32), torch.isin(a, lv))
+    fb, mb = _blur(b.to(torch.float32), torch.isin(b, lv))
+    m_, h, w = a.shape
+    cost = torch.full((m_, 2 * MAX_DY + 1, 2 * MAX_DX + 1), float("inf"))
+    for iy, dy in enumerate(range(-MAX_DY, MAX_DY + 1)):
+        ya, yb = slice(max(0, -dy), h - max(0, dy)), slice(max(0, dy), h + min(0, dy))
+        for ix, dx in enumerate(range(-MAX_DX, MAX_DX + 1)):
+            xa, xb = slice(max(0, -dx), w - max(0, dx)), slice(max(0, dx), w + min(0, dx))
+            both = ma[:, ya, xa] & mb[:, yb, xb]
+            n = both.sum((1, 2))
+            ssd = ((fa[:, ya, xa] - fb[:, yb, xb]).square() * both).sum((1, 2)) / n.clamp(min=1)
+            cost[:, iy, ix] = torch.where(n >= MIN_PIXELS, ssd, torch.full_like(ssd, float("inf")))
+    rows = torch.arange(m_)
+    best = cost.reshape(m_, -1).argmin(1)
+    iy, ix = best // cost.shape[2], (best % cost.shape[2]).clamp(1, 2 * MAX_DX - 1)
+    line = cost[rows, iy]                                           # [M, X]: the best row's costs
+    c0, c1, c2 = line[rows, ix - 1], line[rows, ix], line[rows, ix + 1]
+    curv = c0 - 2 * c1 + c2
+    with torch.no_grad():
+        sub = torch.where(torch.isfinite(curv) & (curv > 0), 0.5 * (c0 - c2) / curv, torch.zeros_like(c1))
+    shift = (ix - MAX_DX).to(torch.float32) + sub.clamp(-0.5, 0.5)
+    finite = line.masked_fill(~torch.isfinite(line), float("nan"))
+    contrast = (torch.nanquantile(finite, 0.5, dim=1) - c1) / c1.clamp(min=1.0)
+    ok = torch.isfinite(c1) & (contrast >= MIN_CONTRAST)
+    return torch.where(ok, shift, torch.full_like(shift, float("nan")))
+
+
+def clip_speed(frames: np.ndarray, fps: float, levels: np.ndarray | None = None) -> float | None:
+    """The demonstration's mean ground shift (px per :func:`window_steps` frames) over every pair
+    of frames that far apart inside the clip (a looped clip's wrap is not crossed), or None when
+    fewer than :data:`MIN_VALID` of them show a ground to measure."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    k = window_steps(fps)
+    levels = ground_levels(frames) if levels is None else levels
+    if len(frames) <= k or len(levels) == 0:
+        return None
+    s = ground_shift(frames[:-k], frames[k:], levels)
+    valid = torch.isfinite(s)
+    if float(valid.float().mean()) < MIN_VALID:
+        return None
+    return float(s[valid].mean())
+
+
+class VideoSpeedTerm:
+    """A reward for travelling as fast as the demonstration, measured in both videos alike.
+
+    Over a rollout of agent frames it measures the ground's shift across each block of
+    :func:`window_steps` frames of an episode and pays ``exp(-((v - v_demo) / sigma)^2)``
+    per step, ``sigma = max(|v_demo|, 1 px)``: a robot walking in place earns exp(-1) of it,
+    one drifting backwards less. Each step gets the measure of the latest block of its
+    episode that ended at or before it (causal; the first block's steps get none). The
+    last frames and episode ages of every env carry over from one rollout to the next.
+    """
+
+    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int) -> None:
+        self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
+        self.sigma = max(abs(self.target), 1.0)                  # px per window
+        self.k = window_steps(fps)
+        self.num_envs = int(num_envs)
+        self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
+        self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next
+        self._held = torch.zeros(self.num_envs)                  # px, the latest block's shift
+        self._has = torch.zeros(self.num_envs, dtype=torch.bool)
+
+    def rollout(self, agent: torch.Tensor, dones: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """For frames [T, N, H, W] uint8 and ``dones`` [T, N] (frame t ends its episode): the term's
+        reward [T, N] (float32), where it applies [T, N] bool, and the shift each step was given
+        (px per window, [T, N], NaN where none)."""
+        agent, dones = torch.as_tensor(agent), torch.as_tensor(dones).bool()
+        steps, n = dones.shape
+        if agent.shape[:2] != (steps, n) or n != self.num_envs:
+            raise ValueError(f"frames {list(agent.shape)} and dones {list(dones.shape)} do not fit {self.num_envs} envs")
+        if self._history is None:
+            self._history = torch.zeros((self.k, n, *agent.shape[2:]), dtype=torch.uint8)
+        frames = torch.cat([self._history, agent.to(torch.uint8)])   # rollout step t at index t + k
+        age, ends = self._age.clone(), torch.zeros(steps, n, dtype=torch.bool)
+        for t in range(steps):                                   # blocks ending at step t
+            ends[t] = (age >= self.k) & (age % self.k == 0)
+            age = torch.where(dones[t], torch.zeros_like(age), age + 1)
+        t_idx, n_idx = ends.nonzero(as_tuple=True)
+        shifts = torch.full((steps, n), float("nan"))
+        if len(t_idx):
+            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.levels)
+        given = torch.full((steps, n), float("nan"))
+        held, has = self._held.clone(), self._has.clone()
+        for t in range(steps):
+            new = torch.isfinite(shifts[t])
+            held, has = torch.where(new, shifts[t], held), has | new
+            given[t] = torch.where(has, held, torch.full_like(held, float("nan")))
+            has = has & ~dones[t]
+        self._held, self._has, self._age = held, has, age
+        self._history = frames[-self.k:].clone()
+        valid = torch.isfinite(given)
+        reward = torch.exp(-((given - self.target) / self.sigma).square()).nan_to_num(0.0)
+        return reward.to(torch.float32), valid, given
