@@ -53,6 +53,9 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     log = (run_dir / "train.log").read_text()
     assert "it     2/2" in log and "holding the default pose scores" in log
     assert report["standing"]["total"] > 0 and "x standing, speed" in p.stdout, p.stdout[-2000:]
+    # the video speed term needs a patterned ground: on with the checker, off with a line on plain
+    assert ("video speed term off" in log) == (robot == "pupper")
+    assert ("video speed term: 0.3 of the reward" in log) == (robot == "laikago")
     if robot == "laikago":   # the probe: at the start, at every evaluation (the curve) and in the report
         assert "alignment probe: 22 graded rollouts" in p.stdout, p.stdout[-2000:]
         assert "reward-score rank corr" in p.stdout
@@ -184,6 +187,8 @@ def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     (["--prior-pull", "1"], "--prior-pull"),
     (["--oracle-speed-weight", "1.5"], "--oracle-speed-weight"),
     (["--oracle-speed-weight", "nan"], "--oracle-speed-weight"),
+    (["--video-speed-weight", "-0.1"], "--video-speed-weight"),
+    (["--video-speed-weight", "nan"], "--video-speed-weight"),
 ])
 def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
     p = run("virl_quad.train", *TINY, "--iterations", "1", "--run-dir", str(tmp_path / "r"), *args)   # args last: they win

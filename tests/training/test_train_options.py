@@ -133,3 +133,12 @@ def test_runs_made_before_the_oracle_speed_term_resume_with_the_score_alone() ->
     assert from_dict({**LEGACY, **old}).run.oracle_speed_weight == 0.0      # what resume reads back
     new = to_dict(TrainArgs.make(reward="oracle"))
     assert from_dict({**LEGACY, **new}).run.oracle_speed_weight == 0.3      # a new run keeps its own
+
+
+def test_runs_made_before_the_video_speed_term_resume_without_it() -> None:
+    from virl_quad.train import LEGACY
+    from virl_quad.training.config import from_dict, to_dict
+
+    old = {k: v for k, v in to_dict(TrainArgs()).items() if k != "video_speed_weight"}
+    assert from_dict({**LEGACY, **old}).distance.video_speed_weight == 0.0
+    assert from_dict({**LEGACY, **to_dict(TrainArgs())}).distance.video_speed_weight == 0.3

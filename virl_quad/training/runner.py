@@ -238,8 +238,9 @@ class VirlRunner(OnPolicyRunner):
         if minutes:
             eta = min(eta, max(60 * minutes - (time.time() - start_wall), 0.0))
         dist = info.get("distance/total", float("nan"))
+        seen = f" | video speed {info['video_speed/ratio']:+.2f}" if "video_speed/ratio" in info else ""
         log(f"it {it:5d}/{total} | steps {self.env_steps:9,d} | {sps:6.0f} st/s | reward {info['reward_mean']:.3f}"
-            f" | dist-loss {dist:.4f} | ep-len {ep_len:5.2f}s | eval {eval_summary(self.last_eval, self.standing)}"
+            f" | dist-loss {dist:.4f}{seen} | ep-len {ep_len:5.2f}s | eval {eval_summary(self.last_eval, self.standing)}"
             f" | ETA {eta / 60:5.1f} min")
         self._warn_collapse(it, info.get("distance/e_spread"), log)
         w = self.writer

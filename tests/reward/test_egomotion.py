@@ -1,0 +1,82 @@
+"""The video speed term: the ground's slide measured in a follow camera's frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from virl_quad.reward import egomotion as eg
+
+SKY, DARK, LIGHT, ROBOT = 255, 95, 150, 40
+
+
+def _scene(offsets: np.ndarray, square: int = 10) -> np.ndarray:
+    """[T, 48, 48] uint8: sky over a checker ground shifted right by ``offsets[t]`` px, with a
+    still dark block (the followed robot) in front of it."""
+    yy, xx = np.mgrid[0:48, 0:48]
+    out = np.empty((len(offsets), 48, 48), dtype=np.uint8)
+    for t, off in enumerate(offsets):
+        board = ((xx - int(off)) // square + yy // square) % 2
+        img = np.where(board == 0, DARK, LIGHT).astype(np.uint8)
+        img[:16] = SKY
+        img[12:30, 16:32] = ROBOT
+        out[t] = img
+    return out
+
+
+@pytest.mark.parametrize("shift", [-5, -3, 0, 2, 6])
+def test_a_known_slide_of_the_ground_is_measured(shift: int) -> None:
+    frames = _scene(np.array([0, shift]))
+    levels = eg.ground_levels(frames)
+    assert DARK in levels and LIGHT in levels and SKY not in levels and ROBOT not in levels
+    got = eg.ground_shift(frames[:1], frames[1:], levels)
+    assert abs(float(got[0]) - shift) < 0.3
+
+
+def test_no_pattern_no_shift() -> None:
+    plain = np.full((2, 48, 48), 120, np.uint8)
+    plain[:, :16] = SKY
+    assert torch.isnan(eg.ground_shift(plain[:1], plain[1:], eg.ground_levels(plain))).all()
+    assert eg.clip_speed(np.repeat(plain, 20, axis=0), 50.0) is None
+
+
+def test_built_in_demonstrations_travel_forwards_at_their_own_speed() -> None:
+    from virl_quad import demo
+
+    speeds = {g: eg.clip_speed(demo.load(g, "pupper").frames, 50.0) for g in ("pace", "bound")}
+    assert speeds["pace"] < 0 and speeds["bound"] < 0            # forwards: the ground slides left
+    assert speeds["bound"] < 1.4 * speeds["pace"]                 # 0.3 m/s against 0.2 m/s
+    pace = demo.load("pace", "pupper").frames
+    assert eg.clip_speed(pace[::-1].copy(), 50.0) == pytest.approx(-speeds["pace"], abs=0.05)
+    assert eg.clip_speed(demo.load("trot", "pupper", ground="plain").frames, 50.0) is None
+
+
+def _rollout(steps: int, envs: int, speed: float) -> np.ndarray:
+    return np.stack([_scene(np.round(speed * np.arange(steps) + 3 * n)) for n in range(envs)], axis=1)
+
+
+def test_the_term_pays_the_demonstration_speed_and_carries_over_rollouts() -> None:
+    k = eg.window_steps(50.0)
+    target = -4.0                                                 # px per window
+    frames = torch.from_numpy(_rollout(40, 3, target / k))
+    dones = torch.zeros(40, 3, dtype=torch.bool)
+    dones[17, 1] = True                                           # env 1 starts again at step 18
+    whole = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3)
+    r, valid, given = whole.rollout(frames, dones)
+    assert not valid[:k].any() and valid[k:, 0].all()             # the first block has no measure yet
+    assert not valid[18:18 + k, 1].any() and valid[18 + k:, 1].all()
+    assert float(r[valid].min()) > 0.9                            # walking at the demonstration's speed
+    halves = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3)
+    parts = [halves.rollout(frames[a:b], dones[a:b]) for a, b in ((0, 13), (13, 40))]
+    assert torch.equal(torch.cat([p[1] for p in parts]), valid)
+    assert torch.allclose(torch.cat([p[0] for p in parts]), r)
+
+
+@pytest.mark.parametrize("speed, low, high", [(0.0, 0.3, 0.45), (4.0, 0.0, 0.02)])
+def test_standing_or_going_backwards_earns_less(speed: float, low: float, high: float) -> None:
+    k = eg.window_steps(50.0)
+    frames = torch.from_numpy(_rollout(3 * k, 1, speed / k))
+    term = eg.VideoSpeedTerm(-4.0, 50.0, np.array([DARK, LIGHT]), 1)
+    r, valid, _ = term.rollout(frames, torch.zeros(3 * k, 1, dtype=torch.bool))
+    assert valid.any() and low <= float(r[valid].mean()) <= high  # exp(-1) in place; exp(-4) backwards
