@@ -53,6 +53,12 @@ def main() -> int:
     fig, ax = plt.subplots(figsize=(8, 4))
     steps = [r["env_steps"] for r in rows]
     ax.plot(steps, [r["reward_alignment"] for r in rows], "o-", label="reward-score rank correlation (probe)")
+    if any("distance_alignment" in r for r in rows):     # the reward mixes in the video speed term
+        ax.plot(steps, [r.get("distance_alignment", float("nan")) for r in rows], "^:",
+                label="the distance model's alone")
+        dist = [r["distance_alignment"] for r in rows if "distance_alignment" in r]
+        print(f"the distance model alone: {min(dist):+.2f} .. {max(dist):+.2f}, "
+              f"{sum(d >= a.bar for d in dist)} of {len(dist)} probes >= {a.bar:g}")
     ax.plot(steps, [r.get("score_vs_standing", float("nan")) for r in rows], "s-", label="score / standing")
     ax.axhline(a.bar, color="gray", ls="--", label=f"bar {a.bar:g}")
     ax.axhline(1.0, color="black", lw=0.8)

@@ -299,11 +299,14 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
 
     t0 = time.time()
     gait = Path(str(args.run.demo)).stem.removeprefix("gait:")
+    source = runner.reward_source
+    speed = (source.speed_weight, source.speed) if source.speed is not None else None
     runner.alignment_probe = AlignmentProbe(args.run.robot, demo, gait, randomize=args.env.randomize,
-                                            ground=args.env.ground)
+                                            ground=args.env.ground, speed=speed)
     first = runner.alignment_probe.probe(model)
     log(f"alignment probe: {len(runner.alignment_probe.rollouts)} graded rollouts ({time.time() - t0:.0f} s); "
-        f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}")
+        f"the reward's rank correlation with the score now {first['reward_alignment']:+.2f}"
+        + (f" (the distance model's alone {first['distance_alignment']:+.2f})" if "distance_alignment" in first else ""))
 
 
 def _warm_start(args: TrainArgs, demo, runner, log) -> None:

@@ -61,6 +61,31 @@ def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tens
     return conv(x * m) / weight.clamp(min=1e-6), weight > 0.95
 
 
+def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor) -> torch.Tensor:
+    """Mean squared difference [M, 2 MAX_DY + 1, 2 MAX_DX + 1] between ``fa`` and ``fb`` moved by
+    (dy, dx) over the pixels that are ground in both (inf where fewer than :data:`MIN_PIXELS`).
+    Each of its sums over pixels is a cross-correlation, done at once for every shift by FFT:
+    sum m_a m_b (a - b)^2 = corr(m_a a^2, m_b) + corr(m_a, m_b b^2) - 2 corr(m_a a, m_b b)."""
+    h, w = fa.shape[1:]
+    size = (h + MAX_DY + 1, w + MAX_DX + 1)               # zero padding: no wrap within the shifts searched
+    a0, b0 = ma.to(torch.float64), mb.to(torch.float64)
+    a1, b1 = a0 * fa.to(torch.float64), b0 * fb.to(torch.float64)
+    spec = {name: torch.fft.rfft2(x, s=size) for name, x in
+            (("a0", a0), ("a1", a1), ("a2", a1 * fa), ("b0", b0), ("b1", b1), ("b2", b1 * fb))}
+
+    def corr(f: torch.Tensor) -> torch.Tensor:            # c[dy, dx] = sum_p A[p] B[p + (dy, dx)]
+        c = torch.fft.irfft2(f, s=size)
+        rows = torch.arange(-MAX_DY, MAX_DY + 1) % size[0]
+        cols = torch.arange(-MAX_DX, MAX_DX + 1) % size[1]
+        return c[:, rows][:, :, cols]
+
+    count = corr(spec["a0"].conj() * spec["b0"]).round()
+    ssd = corr(spec["a2"].conj() * spec["b0"] + spec["a0"].conj() * spec["b2"]
+               - 2 * spec["a1"].conj() * spec["b1"]).clamp(min=0.0)
+    cost = (ssd / count.clamp(min=1.0)).to(torch.float32)
+    return torch.where(count >= MIN_PIXELS, cost, torch.full_like(cost, float("inf")))
+
+
 def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.Tensor,
                  levels: np.ndarray) -> torch.Tensor:
     """Horizontal shift (px, float32 [M]) of the ground from ``earlier`` to ``later`` frames
@@ -75,15 +100,7 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     fa, ma = _blur(a.to(torch.float32), torch.isin(a, lv))
     fb, mb = _blur(b.to(torch.float32), torch.isin(b, lv))
     m_, h, w = a.shape
-    cost = torch.full((m_, 2 * MAX_DY + 1, 2 * MAX_DX + 1), float("inf"))
-    for iy, dy in enumerate(range(-MAX_DY, MAX_DY + 1)):
-        ya, yb = slice(max(0, -dy), h - max(0, dy)), slice(max(0, dy), h + min(0, dy))
-        for ix, dx in enumerate(range(-MAX_DX, MAX_DX + 1)):
-            xa, xb = slice(max(0, -dx), w - max(0, dx)), slice(max(0, dx), w + min(0, dx))
-            both = ma[:, ya, xa] & mb[:, yb, xb]
-            n = both.sum((1, 2))
-            ssd = ((fa[:, ya, xa] - fb[:, yb, xb]).square() * both).sum((1, 2)) / n.clamp(min=1)
-            cost[:, iy, ix] = torch.where(n >= MIN_PIXELS, ssd, torch.full_like(ssd, float("inf")))
+    cost = _shift_costs(fa, ma, fb, mb)
     rows = torch.arange(m_)
     best = cost.reshape(m_, -1).argmin(1)
     iy, ix = best // cost.shape[2], (best % cost.shape[2]).clamp(1, 2 * MAX_DX - 1)
@@ -129,7 +146,7 @@ class VideoSpeedTerm:
     def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int) -> None:
         self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
         self.sigma = max(abs(self.target), 1.0)                  # px per window
-        self.k = window_steps(fps)
+        self.fps, self.k = float(fps), window_steps(fps)
         self.num_envs = int(num_envs)
         self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next

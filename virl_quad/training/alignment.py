@@ -113,26 +113,59 @@ def alignment(model, rollouts: list[GradedRollout]) -> tuple[float, list[float]]
     """(Spearman rank correlation of reward and score over the rollouts, each rollout's reward).
     0 when every reward is the same (a reward that ranks nothing)."""
     rewards = rollout_rewards(model, rollouts)
-    if np.ptp(rewards) == 0.0:
-        return 0.0, rewards
-    return float(spearmanr(rewards, [r.score for r in rollouts]).statistic), rewards
+    return _rank(rewards, rollouts), rewards
+
+
+def speed_rewards(term, rollouts: list[GradedRollout]) -> list[float]:
+    """Mean reward of the video speed term (a :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`,
+    whose target, levels and rate are used) over each rollout's frames from :data:`SKIP` on (NaN
+    where it never applies)."""
+    from virl_quad.reward.egomotion import VideoSpeedTerm
+
+    out = []
+    for r in rollouts:
+        fresh = VideoSpeedTerm(term.target, term.fps, term.levels, 1)
+        reward, valid, _ = fresh.rollout(torch.from_numpy(r.agent[:, None]), torch.zeros(len(r.agent), 1, dtype=torch.bool))
+        reward, valid = reward[SKIP:, 0], valid[SKIP:, 0]
+        out.append(float(reward[valid].mean()) if bool(valid.any()) else float("nan"))
+    return out
+
+
+def _rank(rewards: list[float], rollouts: list[GradedRollout]) -> float:
+    if np.ptp(rewards) == 0.0 or not np.isfinite(rewards).all():
+        return 0.0
+    return float(spearmanr(rewards, [r.score for r in rollouts]).statistic)
 
 
 class AlignmentProbe:
-    """The probe as training uses it: rollouts recorded at construction, ``probe(model)`` after."""
+    """The probe as training uses it: rollouts recorded at construction, ``probe(model)`` after.
+
+    ``speed``: (weight, :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`) when the training
+    reward mixes in the video speed term; the probe then ranks that mixed reward (what the policy
+    is trained on) and reports the distance model's own ranking beside it."""
 
     def __init__(self, robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1),
-                 seconds: float = 4.0, randomize: bool = True, ground: str = "checker") -> None:
+                 seconds: float = 4.0, randomize: bool = True, ground: str = "checker",
+                 speed: tuple[float, object] | None = None) -> None:
         self.rollouts = record(robot, demo, gait, seeds, seconds, randomize, ground)
+        self.speed_weight, self.speed = (0.0, None) if speed is None else (float(speed[0]), speed[1])
+        self._speed_rewards = None if self.speed is None else np.nan_to_num(speed_rewards(self.speed, self.rollouts))
 
     def probe(self, model) -> dict[str, float]:
         """``{"reward_alignment": rho, "reward_best": mean reward of the best-scored controller,
-        "reward_standing": of standing still}`` under ``model``."""
+        "reward_standing": of standing still}`` under ``model`` (with the speed term: of the mixed
+        reward, and ``distance_alignment``, the model's own rho)."""
         rho, rewards = alignment(model, self.rollouts)
+        out = {}
+        if self._speed_rewards is not None:
+            out["distance_alignment"] = rho
+            w = self.speed_weight
+            rewards = list((1 - w) * np.asarray(rewards) + w * self._speed_rewards)
+            rho = _rank(rewards, self.rollouts)
         by = _by_controller(self.rollouts, rewards)
         best = max(by, key=lambda name: by[name][1])
         return {"reward_alignment": rho, "reward_best": by[best][0],
-                "reward_standing": by.get("standing still", (float("nan"), 0.0))[0]}
+                "reward_standing": by.get("standing still", (float("nan"), 0.0))[0], **out}
 
 
 def _by_controller(rollouts: list[GradedRollout], rewards: list[float]) -> dict[str, tuple[float, float]]:
