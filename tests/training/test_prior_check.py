@@ -55,38 +55,3 @@ def test_when_every_finalist_falls_the_least_falling_is_kept_with_a_warning(demo
     assert lines[-1].startswith("warning:") and "cannot carry pupper" in lines[-1]
     with pytest.raises(ValueError):
         pick_carrying(PUPPER, demo, [], STEPS, 0, False, lines.append)
-
-
-def test_a_stance_moves_every_foot_back_and_out_and_must_stay_in_reach() -> None:
-    from virl_quad.training.prior_check import with_stance
-
-    before = TrajectoryGenerator(PUPPER, _trot()).neutral_xy
-    after = TrajectoryGenerator(PUPPER, with_stance(PUPPER, _trot(), 0.02, 0.03)).neutral_xy
-    assert after[:, 0] == pytest.approx(before[:, 0] - 0.02)
-    assert abs(after[:, 1]) == pytest.approx(abs(before[:, 1]) + 0.03)
-    with pytest.raises(ValueError):
-        with_stance(PUPPER, _trot(), 0.0, 0.5)                           # feet half a metre out
-
-
-def test_a_teacher_that_travels_the_video_s_way_keeps_its_stance(demo) -> None:
-    from virl_quad.training.prior_check import pick_stance
-
-    tg, rows = pick_stance(PUPPER, demo, _trot(), {"travel_m": 0.5}, +1.0, STEPS, 0, False)
-    assert tg == _trot()
-    assert rows == []                                                     # nothing tried
-
-
-def test_against_the_video_s_way_stances_are_tried_and_the_furthest_kept(demo) -> None:
-    from virl_quad.training.prior_check import STANCE_VARIANTS, pick_stance, with_stance
-
-    lines: list[str] = []
-    # told that its teacher went 1 m the wrong way (the video going backwards), any variant that
-    # carries the robot does better; the one that goes least far forwards is kept
-    tg, rows = pick_stance(PUPPER, demo, _trot(), {"travel_m": 1.0}, -1.0, 100, 0, False, lines.append)
-    assert len(rows) == len(STANCE_VARIANTS) and len(lines) == len(rows)
-    assert all("stance" in line and "mean travel" in line for line in lines)
-    carrying = [r for r in rows if r["fall_rate"] <= MAX_FALL_RATE]
-    assert carrying, rows
-    kept = [r for r in rows if r.get("kept")]
-    assert kept == [min(carrying, key=lambda r: r["travel_m"])]
-    assert tg == with_stance(PUPPER, _trot(), kept[0]["back_m"], kept[0]["out_m"])

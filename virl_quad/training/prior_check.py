@@ -12,8 +12,7 @@ DAgger a student that falls as often, and PPO a policy that does.
 (:func:`virl_quad.distill.gather`: observed joint angles, action noise, the run's domain
 randomisation) on each finalist, nearest first, and keeps the first whose teacher falls in
 at most :data:`MAX_FALL_RATE` of its episodes; when none does, the one that falls least,
-with a warning. :func:`stance_for_travel` then widens or moves back the kept finalist's stance
-when its teacher travels against the way the video's ground slides.
+with a warning.
 """
 
 from __future__ import annotations
@@ -70,70 +69,3 @@ def pick_carrying(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, 
     log(f"warning: every finalist's tracker fell in more than {MAX_FALL_RATE:.0%} of its episodes: this prior "
         f"cannot carry {spec.name}; going on with finalist {best['finalist']}, which falls least")
     return best["finalist"], rows
-
-
-#: Stance variants tried when the kept finalist's teacher travels against the video's direction:
-#: (m the feet move back, m each foot moves out sideways) from the TG's neutral stance. A side view
-#: cannot show stance width, and the pace's lateral rocking sends a narrow-stanced Pupper backwards
-#: (docs/experiments.md).
-STANCE_VARIANTS = ((0.0, 0.015), (0.0, 0.03), (0.02, 0.015), (0.02, 0.03))
-
-
-def with_stance(spec: RobotSpec, tg: TGParams, back: float, out: float) -> TGParams:
-    """``tg`` with every neutral foot ``back`` m towards the tail and ``out`` m further from the
-    body's midline (ValueError when a foot then leaves the leg's reach)."""
-    from virl_quad.policy.tg import TrajectoryGenerator
-
-    xy = TrajectoryGenerator(spec, tg).neutral_xy.copy()
-    xy[:, 0] -= back
-    xy[:, 1] += np.sign(xy[:, 1]) * out
-    moved = TGParams.from_dict({**tg.to_dict(), "neutral_xy": xy.tolist()})
-    TrajectoryGenerator(spec, moved)                       # reach and joint limits checked
-    return moved
-
-
-def pick_stance(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: float, steps: int, seed: int,
-                randomize: bool, log: Callable[[str], None] = print) -> tuple[TGParams, list[dict]]:
-    """When ``tg``'s teacher (its :func:`teacher_trial` figures: ``trial``) travels against
-    ``direction`` (+1: the video's subject goes forwards, -1: backwards), try the
-    :data:`STANCE_VARIANTS` and keep the one that travels furthest in ``direction`` among those
-    whose teacher falls in at most :data:`MAX_FALL_RATE` of its episodes (none: ``tg``). Returns
-    the kept TG and one row per variant tried."""
-    if trial["travel_m"] * direction >= 0:
-        return tg, []
-    best, best_travel, rows = tg, trial["travel_m"] * direction, []
-    for back, out in STANCE_VARIANTS:
-        try:
-            moved = with_stance(spec, tg, back, out)
-        except ValueError:
-            continue
-        row = {"back_m": back, "out_m": out, **teacher_trial(spec, demo, moved, steps, seed, randomize)}
-        rows.append(row)
-        log(f"  stance {back * 100:.1f} cm back, {out * 100:.1f} cm wider: its tracker fell in {row['falls']} of "
-            f"{row['episodes']} episodes, mean travel {row['travel_m']:+.2f} m")
-        if row["fall_rate"] <= MAX_FALL_RATE and row["travel_m"] * direction > best_travel:
-            best, best_travel = moved, row["travel_m"] * direction
-            for r in rows:
-                r["kept"] = r is row
-    return best, rows
-
-
-def stance_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: int, seed: int,
-                      randomize: bool, log: Callable[[str], None] = print) -> TGParams:
-    """The video fit's kept TG (``report``: the fit's report, with its ``physics_check`` rows and
-    ``kept_finalist``), its stance changed by :func:`pick_stance` when its teacher travels against
-    the ground's slide in the demonstration (:func:`virl_quad.reward.egomotion.clip_speed`; a video
-    with no patterned ground: unchanged). Adds ``stance_check`` (rows) and ``stance`` to ``report``."""
-    from virl_quad.reward.egomotion import clip_speed
-
-    travel = clip_speed(demo.frames, demo.fps)          # px: < 0 where the subject goes forwards
-    trial = next((r for r in report.get("physics_check", []) if r["finalist"] == report["kept_finalist"]), None)
-    report["stance"] = None
-    if travel is None or trial is None:
-        return tg
-    moved, report["stance_check"] = pick_stance(spec, demo, tg, trial, -float(np.sign(travel)), steps, seed,
-                                                randomize, log)
-    kept = next((r for r in report["stance_check"] if r.get("kept")), None)
-    if kept is not None:
-        report["stance"] = {"back_m": kept["back_m"], "out_m": kept["out_m"]}
-    return moved
