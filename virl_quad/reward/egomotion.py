@@ -99,7 +99,7 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     lv = torch.as_tensor(levels, dtype=torch.int64)
     fa, ma = _blur(a.to(torch.float32), torch.isin(a, lv))
     fb, mb = _blur(b.to(torch.float32), torch.isin(b, lv))
-    m_, h, w = a.shape
+    m_ = a.shape[0]
     cost = _shift_costs(fa, ma, fb, mb)
     rows = torch.arange(m_)
     best = cost.reshape(m_, -1).argmin(1)
