@@ -9,7 +9,7 @@ forwards look alike to it, and a gait that drifts backwards is rewarded as one t
 This module measures the ground's slide instead: between two frames ``k`` steps apart, the
 shift (px) that best maps the earlier frame's ground pixels onto the later frame's, by a
 masked sum of squared differences over integer shifts (the ground blurred first so that
-the cost is smooth) and a parabola through the best one for the sub-pixel part. The same
+the cost is smooth; every shift's sum at once, by FFT) and a parabola through the best one for the sub-pixel part. The same
 estimator runs on the demonstration and on the agent's frames, so its scale (px per m,
 which perspective varies by row) cancels in their comparison. It needs a ground with a
 pattern the camera sees (the ``checker`` ground); on a plain ground or a textured video
@@ -107,8 +107,7 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     line = cost[rows, iy]                                           # [M, X]: the best row's costs
     c0, c1, c2 = line[rows, ix - 1], line[rows, ix], line[rows, ix + 1]
     curv = c0 - 2 * c1 + c2
-    with torch.no_grad():
-        sub = torch.where(torch.isfinite(curv) & (curv > 0), 0.5 * (c0 - c2) / curv, torch.zeros_like(c1))
+    sub = torch.where(torch.isfinite(curv) & (curv > 0), 0.5 * (c0 - c2) / curv, torch.zeros_like(c1))
     shift = (ix - MAX_DX).to(torch.float32) + sub.clamp(-0.5, 0.5)
     finite = line.masked_fill(~torch.isfinite(line), float("nan"))
     contrast = (torch.nanquantile(finite, 0.5, dim=1) - c1) / c1.clamp(min=1.0)
