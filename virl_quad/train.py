@@ -148,9 +148,10 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Pa
 
 def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
     """The TG fitted to the demonstration's frames, the nearest finalist whose warm-start teacher
-    carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`); writes
+    carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`), with
+    hind feet and swing changed where that teacher travels against the video's ground; writes
     prior_fit.json and prior_fit.png (video | fitted gait) into the run folder."""
-    from virl_quad.training.prior_check import pick_carrying
+    from virl_quad.training.prior_check import gait_for_travel, pick_carrying
     from virl_quad.training.video_prior import describe, fit_tg_to_video, save_fit_sheet, silhouettes
 
     print("fitting the gait prior to the demonstration video ...", flush=True)
@@ -162,6 +163,9 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
                                                    args.run.seed, args.env.randomize, say)
     tg = finalists[k]
     report["kept_finalist"], report["distance"] = k, report["finalists"][k]["distance"]
+    if args.prior.warm_start_rounds > 0:
+        tg = gait_for_travel(spec, demo, tg, report, args.prior.warm_start_steps, args.run.seed,
+                             args.env.randomize, say)
     run_dir.mkdir(parents=True, exist_ok=True)
     sheet = save_fit_sheet(silhouettes(demo.frames), fitted[k], run_dir / "prior_fit.png", fps=demo.fps,
                            title=f"video | fit: {tg.frequency:.2f} Hz, duty {tg.duty:.2f}")

@@ -13,6 +13,13 @@ DAgger a student that falls as often, and PPO a policy that does.
 randomisation) on each finalist, nearest first, and keeps the first whose teacher falls in
 at most :data:`MAX_FALL_RATE` of its episodes; when none does, the one that falls least,
 with a warning.
+
+:func:`gait_for_travel` then checks which way the kept finalist's teacher travels. A side view
+at 48 px fixes the phase pattern, period and step well, but not what makes a Pupper's pace go
+forwards on the physics robot: its hind feet's fore-aft place and how high the feet clear the
+ground while the body rocks. When the teacher travels against the way the video's ground slides
+(:func:`virl_quad.reward.egomotion.clip_speed`), the :data:`GAIT_VARIANTS` are tried and the one
+whose teacher goes furthest the video's way, without falling more, is kept.
 """
 
 from __future__ import annotations
@@ -69,3 +76,74 @@ def pick_carrying(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, 
     log(f"warning: every finalist's tracker fell in more than {MAX_FALL_RATE:.0%} of its episodes: this prior "
         f"cannot carry {spec.name}; going on with finalist {best['finalist']}, which falls least")
     return best["finalist"], rows
+
+
+#: Variants tried when the kept finalist's teacher travels against the video's direction:
+#: (m the hind feet move towards the tail, factor on the swing height). The pace fitted to the
+#: built-in video (swing 1.5 cm) drifts backwards; with its hind feet 2 cm back and 3 cm of swing
+#: its teacher walks forwards (docs/experiments.md).
+GAIT_VARIANTS = ((0.01, 1.0), (0.02, 1.0), (0.0, 2.0), (0.01, 2.0), (0.02, 2.0))
+
+
+def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float) -> TGParams:
+    """``tg`` with its hind neutral feet ``hind_back`` m towards the tail and its swing height
+    times ``swing_scale`` (ValueError when a foot then leaves the leg's reach)."""
+    from virl_quad.policy.tg import TrajectoryGenerator
+
+    xy = TrajectoryGenerator(spec, tg).neutral_xy.copy()
+    xy[2:, 0] -= hind_back                                 # legs FR, FL, RR, RL: the last two are hind
+    moved = TGParams.from_dict({**tg.to_dict(), "neutral_xy": xy.tolist(),
+                                "swing_height": tg.swing_height * swing_scale})
+    TrajectoryGenerator(spec, moved)                       # reach and joint limits checked
+    return moved
+
+
+def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: float, steps: int, seed: int,
+                 randomize: bool, log: Callable[[str], None] = print) -> tuple[TGParams, list[dict]]:
+    """When ``tg``'s teacher (its :func:`teacher_trial` figures: ``trial``) travels against
+    ``direction`` (+1: the video's subject goes forwards, -1: backwards), try the
+    :data:`GAIT_VARIANTS` and keep the one that travels furthest in ``direction`` among those whose
+    teacher falls in at most ``max(MAX_FALL_RATE, trial's fall rate)`` of its episodes (none:
+    ``tg``). Returns the kept TG and one row per variant tried."""
+    if trial["travel_m"] * direction >= 0:
+        return tg, []
+    allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
+    best, best_travel, rows = tg, trial["travel_m"] * direction, []
+    for hind_back, swing_scale in GAIT_VARIANTS:
+        try:
+            moved = with_variant(spec, tg, hind_back, swing_scale)
+        except ValueError:
+            continue
+        row = {"hind_back_m": hind_back, "swing_scale": swing_scale,
+               **teacher_trial(spec, demo, moved, steps, seed, randomize)}
+        rows.append(row)
+        log(f"  hind feet {hind_back * 100:.1f} cm back, swing x{swing_scale:g}: its tracker fell in {row['falls']} "
+            f"of {row['episodes']} episodes, mean travel {row['travel_m']:+.2f} m")
+        if row["fall_rate"] <= allowed and row["travel_m"] * direction > best_travel:
+            best, best_travel = moved, row["travel_m"] * direction
+            for r in rows:
+                r["kept"] = r is row
+    return best, rows
+
+
+def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: int, seed: int,
+                    randomize: bool, log: Callable[[str], None] = print) -> TGParams:
+    """The video fit's kept TG (``report``: the fit's report, with its ``physics_check`` rows and
+    ``kept_finalist``), changed by :func:`pick_variant` when its teacher travels against the
+    ground's slide in the demonstration (a video with no patterned ground: unchanged). Adds
+    ``travel_check`` (rows) and ``variant`` (the kept one, or None) to ``report``."""
+    from virl_quad.reward.egomotion import clip_speed
+
+    slide = clip_speed(demo.frames, demo.fps)           # px per window: < 0 where the subject goes forwards
+    trial = next((r for r in report.get("physics_check", []) if r["finalist"] == report["kept_finalist"]), None)
+    report["variant"] = None
+    if slide is None or trial is None:
+        return tg
+    log("  the kept finalist's tracker travels against the video's ground slide: trying gait variants"
+        if trial["travel_m"] * -np.sign(slide) < 0 else "  its tracker travels the way the video's ground slides")
+    moved, report["travel_check"] = pick_variant(spec, demo, tg, trial, -float(np.sign(slide)), steps, seed,
+                                                 randomize, log)
+    kept = next((r for r in report["travel_check"] if r.get("kept")), None)
+    if kept is not None:
+        report["variant"] = {"hind_back_m": kept["hind_back_m"], "swing_scale": kept["swing_scale"]}
+    return moved
