@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from virl_quad import demo as demo_lib
@@ -55,3 +56,56 @@ def test_when_every_finalist_falls_the_least_falling_is_kept_with_a_warning(demo
     assert lines[-1].startswith("warning:") and "cannot carry pupper" in lines[-1]
     with pytest.raises(ValueError):
         pick_carrying(PUPPER, demo, [], STEPS, 0, False, lines.append)
+
+
+def _video_pace() -> TGParams:
+    """The pace as the main job fits it to the built-in pace video (2 Hz, duty 0.5, step 4.7 cm,
+    swing 1.5 cm): on the physics robot its teacher drifts backwards."""
+    return TGParams(frequency=2.0, offsets=(0.0, 0.5, 0.0, 0.5), duty=0.5, step_length=0.047,
+                    swing_height=0.015, stance_height=0.14)
+
+
+def test_a_variant_moves_the_hind_feet_back_scales_the_swing_and_must_stay_in_reach() -> None:
+    from virl_quad.training.prior_check import with_variant
+
+    before = TrajectoryGenerator(PUPPER, _trot()).neutral_xy
+    moved = with_variant(PUPPER, _trot(), 0.02, 2.0)
+    after = TrajectoryGenerator(PUPPER, moved).neutral_xy
+    assert after[:2] == pytest.approx(before[:2])                        # front feet stay
+    assert after[2:, 0] == pytest.approx(before[2:, 0] - 0.02)           # hind feet 2 cm back
+    assert after[:, 1] == pytest.approx(before[:, 1])
+    assert moved.swing_height == pytest.approx(2.0 * _trot().swing_height)
+    with pytest.raises(ValueError):
+        with_variant(PUPPER, _trot(), 0.5, 1.0)                          # hind feet half a metre back
+
+
+def test_a_teacher_that_travels_the_video_s_way_keeps_its_gait(demo) -> None:
+    from virl_quad.training.prior_check import pick_variant
+
+    tg, rows = pick_variant(PUPPER, demo, _trot(), {"travel_m": 0.5}, +1.0, STEPS, 0, False)
+    assert tg == _trot() and rows == []                                  # nothing tried
+
+
+def test_the_backward_pace_gets_a_variant_that_walks_forwards() -> None:
+    from virl_quad.training.prior_check import gait_for_travel
+
+    pace = demo_lib.load("pace", "pupper")                               # its ground slides: forwards
+    trial = teacher_trial(PUPPER, pace, _video_pace(), STEPS, seed=0, randomize=False)
+    assert trial["travel_m"] < 0, trial                                  # the fitted pace goes backwards
+    report = {"physics_check": [{"finalist": 0, **trial}], "kept_finalist": 0}
+    lines: list[str] = []
+    tg = gait_for_travel(PUPPER, pace, _video_pace(), report, STEPS, 0, False, lines.append)
+    kept = [r for r in report["travel_check"] if r.get("kept")]
+    assert len(kept) == 1 and report["variant"] is not None, lines
+    assert kept[0]["travel_m"] > 0.2 and kept[0]["fall_rate"] <= MAX_FALL_RATE, lines
+    assert kept[0]["travel_m"] == max(r["travel_m"] for r in report["travel_check"] if r["fall_rate"] <= MAX_FALL_RATE)
+    assert tg != _video_pace() and any("hind feet" in line for line in lines)
+
+
+def test_a_video_without_a_patterned_ground_keeps_its_gait(demo) -> None:
+    from virl_quad.training.prior_check import gait_for_travel
+
+    plain = dataclasses.replace(demo, frames=np.full_like(demo.frames, 128))
+    report = {"physics_check": [{"finalist": 0, "travel_m": -1.0, "fall_rate": 0.0}], "kept_finalist": 0}
+    assert gait_for_travel(PUPPER, plain, _trot(), report, STEPS, 0, False) == _trot()
+    assert report["variant"] is None and "travel_check" not in report
