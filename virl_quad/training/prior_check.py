@@ -19,7 +19,8 @@ at 48 px fixes the phase pattern, period and step well, but not what makes a Pup
 forwards on the physics robot: its hind feet's fore-aft place and how high the feet clear the
 ground while the body rocks. When the teacher travels against the way the video's ground slides
 (:func:`virl_quad.reward.egomotion.clip_speed`), the :data:`GAIT_VARIANTS` are tried and the one
-whose teacher goes furthest the video's way, without falling more, is kept.
+whose teacher goes furthest the video's way, falling in at most half its episodes (or no more
+than the kept gait's own teacher), is kept. The contact sheet shows the fitted gait before it.
 """
 
 from __future__ import annotations
