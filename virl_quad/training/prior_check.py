@@ -108,8 +108,9 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
     ``tg``). Returns the kept TG and one row per variant tried."""
     if trial["travel_m"] * direction >= 0:
         return tg, []
+    log("  the kept gait's tracker travels against the video's ground slide: trying gait variants")
     allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
-    best, best_travel, rows = tg, trial["travel_m"] * direction, []
+    best, best_travel, best_row, rows = tg, trial["travel_m"] * direction, None, []
     for hind_back, swing_scale in GAIT_VARIANTS:
         try:
             moved = with_variant(spec, tg, hind_back, swing_scale)
@@ -121,9 +122,9 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
         log(f"  hind feet {hind_back * 100:.1f} cm back, swing x{swing_scale:g}: its tracker fell in {row['falls']} "
             f"of {row['episodes']} episodes, mean travel {row['travel_m']:+.2f} m")
         if row["fall_rate"] <= allowed and row["travel_m"] * direction > best_travel:
-            best, best_travel = moved, row["travel_m"] * direction
-            for r in rows:
-                r["kept"] = r is row
+            best, best_travel, best_row = moved, row["travel_m"] * direction, row
+    for r in rows:
+        r["kept"] = r is best_row
     return best, rows
 
 
@@ -140,8 +141,6 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
     report["variant"] = None
     if slide is None or trial is None:
         return tg
-    log("  the kept finalist's tracker travels against the video's ground slide: trying gait variants"
-        if trial["travel_m"] * -np.sign(slide) < 0 else "  its tracker travels the way the video's ground slides")
     moved, report["travel_check"] = pick_variant(spec, demo, tg, trial, -float(np.sign(slide)), steps, seed,
                                                  randomize, log)
     kept = next((r for r in report["travel_check"] if r.get("kept")), None)
