@@ -65,25 +65,49 @@ def _video_pace() -> TGParams:
                     swing_height=0.015, stance_height=0.14)
 
 
-def test_a_variant_moves_the_hind_feet_back_scales_the_swing_and_must_stay_in_reach() -> None:
+def test_a_variant_moves_the_hind_feet_back_scales_swing_and_step_and_must_stay_in_reach() -> None:
     from virl_quad.training.prior_check import with_variant
 
     before = TrajectoryGenerator(PUPPER, _trot()).neutral_xy
-    moved = with_variant(PUPPER, _trot(), 0.02, 2.0)
+    moved = with_variant(PUPPER, _trot(), 0.02, 2.0, 1.5)
     after = TrajectoryGenerator(PUPPER, moved).neutral_xy
     assert after[:2] == pytest.approx(before[:2])                        # front feet stay
     assert after[2:, 0] == pytest.approx(before[2:, 0] - 0.02)           # hind feet 2 cm back
     assert after[:, 1] == pytest.approx(before[:, 1])
     assert moved.swing_height == pytest.approx(2.0 * _trot().swing_height)
+    assert moved.step_length == pytest.approx(1.5 * _trot().step_length)
     with pytest.raises(ValueError):
         with_variant(PUPPER, _trot(), 0.5, 1.0)                          # hind feet half a metre back
 
 
-def test_a_teacher_that_travels_the_video_s_way_keeps_its_gait(demo) -> None:
-    from virl_quad.training.prior_check import pick_variant
+def test_a_teacher_that_travels_the_video_s_way_fast_enough_keeps_its_gait(demo) -> None:
+    from virl_quad.training.prior_check import MIN_SPEED_SHARE, nominal_speed, pick_variant
 
-    tg, rows = pick_variant(PUPPER, demo, _trot(), {"travel_m": 0.5}, +1.0, STEPS, 0, False)
+    fast = MIN_SPEED_SHARE * nominal_speed(_trot()) * 1.05                # m/s, just over the share
+    tg, rows = pick_variant(PUPPER, demo, _trot(), {"travel_m": 0.5, "speed_mps": fast}, +1.0, STEPS, 0, False)
     assert tg == _trot() and rows == []                                  # nothing tried
+
+
+def _video_bound() -> TGParams:
+    """The bound as the main job fits it to the built-in bound video (2.5 Hz, duty 0.5, step 5 cm,
+    swing 3 cm): its teacher carries the robot at about a fifth of the gait's 0.25 m/s."""
+    return TGParams(frequency=2.5, offsets=(0.0, 0.0, 0.5, 0.5), duty=0.5, step_length=0.05,
+                    swing_height=0.03, stance_height=0.14)
+
+
+def test_a_slow_bound_gets_a_variant_that_travels_further() -> None:
+    from virl_quad.training.prior_check import MIN_SPEED_SHARE, gait_for_travel, nominal_speed
+
+    bound = demo_lib.load("bound", "pupper")
+    trial = teacher_trial(PUPPER, bound, _video_bound(), STEPS, seed=0, randomize=False)
+    assert 0 < trial["speed_mps"] < MIN_SPEED_SHARE * nominal_speed(_video_bound()), trial
+    report = {"physics_check": [{"finalist": 0, **trial}], "kept_finalist": 0}
+    lines: list[str] = []
+    tg = gait_for_travel(PUPPER, bound, _video_bound(), report, STEPS, 0, False, lines.append)
+    kept = [r for r in report["travel_check"] if r.get("kept")]
+    assert len(kept) == 1 and kept[0]["travel_m"] > trial["travel_m"] + 0.2, lines
+    assert kept[0]["fall_rate"] <= MAX_FALL_RATE and tg != _video_bound()
+    assert "under 0.33 of its gait's" in lines[0]
 
 
 def test_the_backward_pace_gets_a_variant_that_walks_forwards() -> None:
