@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import time
 from pathlib import Path
 from typing import Callable
@@ -238,9 +239,11 @@ class VirlRunner(OnPolicyRunner):
         if minutes:
             eta = min(eta, max(60 * minutes - (time.time() - start_wall), 0.0))
         dist = info.get("distance/total", float("nan"))
+        dist_text = f" | dist-loss {dist:.4f}" if math.isfinite(dist) else ""          # no distance model: none
         seen = f" | video speed {info['video_speed/ratio']:+.2f}" if "video_speed/ratio" in info else ""
+        ep_text = f"{ep_len:5.2f}s" if math.isfinite(ep_len) else "    - "              # no episode ended yet
         log(f"it {it:5d}/{total} | steps {self.env_steps:9,d} | {sps:6.0f} st/s | reward {info['reward_mean']:.3f}"
-            f" | dist-loss {dist:.4f}{seen} | ep-len {ep_len:5.2f}s | eval {eval_summary(self.last_eval, self.standing)}"
+            f"{dist_text}{seen} | ep-len {ep_text} | eval {eval_summary(self.last_eval, self.standing)}"
             f" | ETA {eta / 60:5.1f} min")
         self._warn_collapse(it, info.get("distance/e_spread"), log)
         w = self.writer
