@@ -52,6 +52,24 @@ def test_built_in_demonstrations_travel_forwards_at_their_own_speed() -> None:
     assert eg.clip_speed(demo.load("trot", "pupper", ground="plain").frames, 50.0) is None
 
 
+def test_a_slide_that_would_alias_gets_a_shorter_window() -> None:
+    slow = _scene(np.round(0.5 * np.arange(40)))               # 0.5 px per frame: 4 px per 8 frames
+    assert eg.clip_window(slow, 50.0) == eg.window_steps(50.0)
+    fast = _scene(np.round(-1.6 * np.arange(40)))              # 12.8 px per 8 frames: past half the 20 px period
+    k = eg.clip_window(fast, 50.0)
+    assert 1 <= k < eg.window_steps(50.0) and 1.6 * k < 5.0    # short enough for twice the slide
+    assert eg.clip_speed(fast, 50.0) == pytest.approx(-1.6 * k, abs=0.3)   # forwards, per its window
+    assert eg.clip_speed(fast, 50.0, window=eg.window_steps(50.0)) > 0   # the default window reads it backwards
+
+
+def test_the_laikago_trot_travels_forwards() -> None:
+    from virl_quad import demo
+
+    frames = demo.load("trot", "laikago").frames                 # ~0.8 m/s at Laikago's camera scale, 33 Hz
+    assert eg.clip_window(frames, 33.33) < eg.window_steps(33.33)
+    assert eg.clip_speed(frames, 33.33) < 0
+
+
 def _rollout(steps: int, envs: int, speed: float) -> np.ndarray:
     return np.stack([_scene(np.round(speed * np.arange(steps) + 3 * n)) for n in range(envs)], axis=1)
 

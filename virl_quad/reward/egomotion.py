@@ -31,11 +31,40 @@ BLUR_SIGMA = 1.0     # px, Gaussian blur of the ground before matching
 MIN_PIXELS = 50      # ground pixels two frames must share for a shift to count
 MIN_VALID = 0.5      # share of a clip's frame pairs that must give a shift for a clip speed
 MIN_CONTRAST = 0.2   # relative rise of the cost away from its best shift: below, no pattern to see
+MIN_SLIDE = 0.1      # px per frame, a clip's slide under which its window cannot alias
 
 
 def window_steps(fps: float) -> int:
     """Frames between the two frames compared, :data:`WINDOW_S` at ``fps`` (at least 2)."""
     return max(2, int(round(WINDOW_S * float(fps))))
+
+
+def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None) -> int:
+    """Frames between the two frames compared for this clip: :func:`window_steps`, unless the
+    ground slides so far in that many frames that its pattern aliases (a shift past half the
+    checker's period reads as one the other way: a Laikago's trot at its camera's scale). The
+    clip's mean shift is measured over 1, 2, ... frames; at the first span whose shift per frame
+    turns against, or strays by over half from, the 1-frame figure, half that span is kept, so
+    that an agent up to twice as fast stays unaliased too."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    full = window_steps(fps)
+    levels = ground_levels(frames) if levels is None else levels
+    if len(frames) <= full or len(levels) == 0:
+        return full
+
+    def per_frame(k: int) -> float:
+        s = ground_shift(frames[:-k], frames[k:], levels)
+        s = s[torch.isfinite(s)]
+        return float(s.mean()) / k if len(s) else float("nan")
+
+    one = per_frame(1)
+    if not np.isfinite(one) or abs(one) < MIN_SLIDE:
+        return full                                     # too slow to alias within the default window
+    for k in range(2, full + 1):
+        v = per_frame(k)
+        if not np.isfinite(v) or v * one <= 0 or abs(v - one) > 0.5 * abs(one):
+            return max(1, k // 2)
+    return full
 
 
 def ground_levels(frames: np.ndarray) -> np.ndarray:
@@ -115,13 +144,15 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     return torch.where(ok, shift, torch.full_like(shift, float("nan")))
 
 
-def clip_speed(frames: np.ndarray, fps: float, levels: np.ndarray | None = None) -> float | None:
-    """The demonstration's mean ground shift (px per :func:`window_steps` frames) over every pair
-    of frames that far apart inside the clip (a looped clip's wrap is not crossed), or None when
-    fewer than :data:`MIN_VALID` of them show a ground to measure."""
+def clip_speed(frames: np.ndarray, fps: float, levels: np.ndarray | None = None,
+               window: int | None = None) -> float | None:
+    """The demonstration's mean ground shift (px per ``window`` frames, default
+    :func:`clip_window`) over every pair of frames that far apart inside the clip (a looped
+    clip's wrap is not crossed), or None when fewer than :data:`MIN_VALID` of them show a
+    ground to measure."""
     frames = np.asarray(frames, dtype=np.uint8)
-    k = window_steps(fps)
     levels = ground_levels(frames) if levels is None else levels
+    k = clip_window(frames, fps, levels) if window is None else int(window)
     if len(frames) <= k or len(levels) == 0:
         return None
     s = ground_shift(frames[:-k], frames[k:], levels)
@@ -135,17 +166,19 @@ class VideoSpeedTerm:
     """A reward for travelling as fast as the demonstration, measured in both videos alike.
 
     Over a rollout of agent frames it measures the ground's shift across each block of
-    :func:`window_steps` frames of an episode and pays ``exp(-((v - v_demo) / sigma)^2)``
+    ``window`` frames (the demonstration's :func:`clip_window`) of an episode and pays ``exp(-((v - v_demo) / sigma)^2)``
     per step, ``sigma = max(|v_demo|, 1 px)``: a robot walking in place earns exp(-1) of it,
     one drifting backwards less. Each step gets the measure of the latest block of its
     episode that ended at or before it (causal; the first block's steps get none). The
     last frames and episode ages of every env carry over from one rollout to the next.
     """
 
-    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int) -> None:
+    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int,
+                 window: int | None = None) -> None:
         self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
         self.sigma = max(abs(self.target), 1.0)                  # px per window
-        self.fps, self.k = float(fps), window_steps(fps)
+        self.fps = float(fps)
+        self.k = window_steps(fps) if window is None else int(window)   # frames; the target's window
         self.num_envs = int(num_envs)
         self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next
