@@ -166,11 +166,11 @@ class VideoSpeedTerm:
     """A reward for travelling as fast as the demonstration, measured in both videos alike.
 
     Over a rollout of agent frames it measures the ground's shift across each block of
-    ``window`` frames (the demonstration's :func:`clip_window`) of an episode and pays ``exp(-((v - v_demo) / sigma)^2)``
-    per step, ``sigma = max(|v_demo|, 1 px)``: a robot walking in place earns exp(-1) of it,
-    one drifting backwards less. Each step gets the measure of the latest block of its
-    episode that ended at or before it (causal; the first block's steps get none). The
-    last frames and episode ages of every env carry over from one rollout to the next.
+    ``window`` frames (the demonstration's :func:`clip_window`) of an episode and pays
+    ``exp(-((v - v_demo) / sigma)^2)`` per step, ``sigma = max(|v_demo|, 1 px)``: a robot walking
+    in place earns exp(-1) of it, one drifting backwards less. Each step gets the measure of the
+    latest block of its episode that ended at or before it (causal; the first block's steps get
+    none). The last frames and episode ages of every env carry over from one rollout to the next.
     """
 
     def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int,

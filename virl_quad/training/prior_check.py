@@ -126,7 +126,7 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
     one that travels furthest in ``direction`` among those whose teacher falls in at most
     ``max(MAX_FALL_RATE, trial's fall rate)`` of its episodes (none: ``tg``). Returns the kept TG
     and one row per variant tried."""
-    speed = trial.get("speed_mps", trial["travel_m"]) * direction        # m/s the video's way
+    speed = trial["speed_mps"] * direction                               # m/s the video's way
     if trial["travel_m"] * direction < 0:
         log("  the kept gait's tracker travels against the video's ground slide: trying gait variants")
     elif speed < MIN_SPEED_SHARE * nominal_speed(tg):
