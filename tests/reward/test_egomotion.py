@@ -80,12 +80,12 @@ def test_the_term_pays_the_demonstration_speed_and_carries_over_rollouts() -> No
     frames = torch.from_numpy(_rollout(40, 3, target / k))
     dones = torch.zeros(40, 3, dtype=torch.bool)
     dones[17, 1] = True                                           # env 1 starts again at step 18
-    whole = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3)
+    whole = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3, k)
     r, valid, given = whole.rollout(frames, dones)
     assert not valid[:k].any() and valid[k:, 0].all()             # the first block has no measure yet
     assert not valid[18:18 + k, 1].any() and valid[18 + k:, 1].all()
     assert float(r[valid].min()) > 0.9                            # walking at the demonstration's speed
-    halves = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3)
+    halves = eg.VideoSpeedTerm(target, 50.0, np.array([DARK, LIGHT]), 3, k)
     parts = [halves.rollout(frames[a:b], dones[a:b]) for a, b in ((0, 13), (13, 40))]
     assert torch.equal(torch.cat([p[1] for p in parts]), valid)
     assert torch.allclose(torch.cat([p[0] for p in parts]), r)
@@ -95,6 +95,6 @@ def test_the_term_pays_the_demonstration_speed_and_carries_over_rollouts() -> No
 def test_standing_or_going_backwards_earns_less(speed: float, low: float, high: float) -> None:
     k = eg.window_steps(50.0)
     frames = torch.from_numpy(_rollout(3 * k, 1, speed / k))
-    term = eg.VideoSpeedTerm(-4.0, 50.0, np.array([DARK, LIGHT]), 1)
+    term = eg.VideoSpeedTerm(-4.0, 50.0, np.array([DARK, LIGHT]), 1, k)
     r, valid, _ = term.rollout(frames, torch.zeros(3 * k, 1, dtype=torch.bool))
     assert valid.any() and low <= float(r[valid].mean()) <= high  # exp(-1) in place; exp(-4) backwards

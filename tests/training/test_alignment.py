@@ -39,12 +39,13 @@ def test_a_reward_that_ranks_nothing_aligns_zero() -> None:
 
 
 def test_with_the_video_speed_term_the_probe_ranks_the_mixed_reward() -> None:
-    from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, ground_levels
+    from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, clip_window, ground_levels
     from virl_quad.training.alignment import rollout_rewards, speed_rewards
 
     demo = demo_lib.load("trot", "pupper")
     levels = ground_levels(demo.frames)
-    term = VideoSpeedTerm(clip_speed(demo.frames, demo.fps, levels), demo.fps, levels, 16)
+    window = clip_window(demo.frames, demo.fps, levels)
+    term = VideoSpeedTerm(clip_speed(demo.frames, demo.fps, levels, window), demo.fps, levels, 16, window)
     probe = AlignmentProbe.__new__(AlignmentProbe)
     probe.rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=1.5, randomize=False)
     speed = dict(zip((r.controller for r in probe.rollouts), speed_rewards(term, probe.rollouts)))

@@ -173,12 +173,11 @@ class VideoSpeedTerm:
     none). The last frames and episode ages of every env carry over from one rollout to the next.
     """
 
-    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int,
-                 window: int | None = None) -> None:
+    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int, window: int) -> None:
         self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
         self.sigma = max(abs(self.target), 1.0)                  # px per window
         self.fps = float(fps)
-        self.k = window_steps(fps) if window is None else int(window)   # frames; the target's window
+        self.k = int(window)                                     # frames: the window the target was measured over
         self.num_envs = int(num_envs)
         self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next

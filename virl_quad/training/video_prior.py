@@ -269,7 +269,7 @@ def describe(params: TGParams, report: dict) -> str:
             + (f"; finalist {report['kept_finalist']}: the nearer ones' trackers fell in more than half their "
                "episodes" if report.get("kept_finalist") else "")
             + (f"; hind feet {report['variant']['hind_back_m'] * 100:.1f} cm back, swing x"
-               f"{report['variant']['swing_scale']:g}, step x{report['variant'].get('step_scale', 1.0):g}: "
+               f"{report['variant']['swing_scale']:g}, step x{report['variant']['step_scale']:g}: "
                "its tracker travels further the way the video's ground slides" if report.get("variant") else ""))
 
 
