@@ -183,3 +183,30 @@ def test_oracle_reward_mixes_the_score_with_the_forward_speed_term() -> None:
         env.close()
     with pytest.raises(ValueError, match="oracle_speed_weight"):
         make("pupper", demo=demo, oracle_reward=True, oracle_speed_weight=1.5)
+
+
+def test_oracle_reward_is_the_score_against_the_reference_at_each_step() -> None:
+    """The env's reference table (sampled once) gives what sampling each step's reference does,
+    across a reset and past the end of the demonstration's loop."""
+    from virl_quad import demo as demo_lib
+    from virl_quad.evaluation.score import Trajectory, reference_trajectory, term_errors, term_rewards
+
+    demo = demo_lib.load("bound", "pupper")
+    env = make("pupper", demo=demo, oracle_reward=True, oracle_speed_weight=0.0, render=False, episode_seconds=1.0)
+    rng = np.random.default_rng(0)
+    checked = 0
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        for _ in range(60):
+            _, reward, terminated, truncated, _ = env.step(rng.uniform(-0.2, 0.2, 12))
+            s = env.world.state()
+            traj = Trajectory(root_pos=s.base_pos[None], root_quat=s.base_quat[None], q=s.q[None], dq=s.dq[None],
+                              root_lin_vel=s.base_lin_vel[None], root_ang_vel=s.base_ang_vel[None],
+                              feet=env.world.foot_positions()[None])
+            ref = reference_trajectory(demo.motion, np.array([env.demo_step / demo.fps]), env._kin)
+            assert reward == pytest.approx(float(term_rewards(term_errors(traj, ref, env._kin))["total"][0]), abs=1e-12)
+            checked += 1
+            if terminated or truncated:
+                break
+    assert checked > 60 and env.demo_step > demo.num_frames // 2
+    env.close()

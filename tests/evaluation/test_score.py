@@ -76,6 +76,40 @@ def test_term_errors_are_what_they_say(gait_motions):
     np.testing.assert_allclose(e2["root_velocity"], 0.0, atol=1e-12)
 
 
+def test_term_errors_match_rotation_algebra_on_tilted_random_states(gait_motions):
+    """The numpy heading and angle algebra gives scipy Rotation's figures for arbitrary (tilted,
+    turned) states: headings from the rotated x axis, angles of R_ref^T R."""
+    from scipy.spatial.transform import Rotation
+
+    from virl_quad.kinematics import Kinematics
+
+    rng = np.random.default_rng(4)
+    kin = Kinematics(robots.get("pupper"))
+
+    def random_traj(n=50):
+        return score.Trajectory(root_pos=rng.normal(size=(n, 3)), root_quat=Rotation.random(n, rng=rng).as_quat(),
+                                q=rng.normal(size=(n, 12)), dq=rng.normal(size=(n, 12)),
+                                root_lin_vel=rng.normal(size=(n, 3)), root_ang_vel=rng.normal(size=(n, 3)),
+                                feet=rng.normal(size=(n, 4, 3)))
+
+    a, b = random_traj(), random_traj()
+    e = score.term_errors(a, b, kin)
+
+    def unheaded(t, v):
+        x = Rotation.from_quat(t.root_quat).apply([1.0, 0.0, 0.0])
+        r = Rotation.from_euler("z", -np.arctan2(x[:, 1], x[:, 0])[:, None])
+        return np.stack([r.apply(v[:, k]) for k in range(v.shape[1])], axis=1) if v.ndim == 3 else r.apply(v)
+
+    feet = unheaded(a, a.feet - a.root_pos[:, None]) - unheaded(b, b.feet - b.root_pos[:, None])
+    angle = (Rotation.from_quat(b.root_quat).inv() * Rotation.from_quat(a.root_quat)).magnitude()
+    dv = unheaded(a, a.root_lin_vel) - unheaded(b, b.root_lin_vel)
+    dw = unheaded(a, a.root_ang_vel) - unheaded(b, b.root_ang_vel)
+    np.testing.assert_allclose(e["end_effector"], np.sum(feet ** 2, axis=(1, 2)), rtol=1e-10)
+    np.testing.assert_allclose(e["root_pose"], (a.root_pos[:, 2] - b.root_pos[:, 2]) ** 2 + 0.5 * angle ** 2, rtol=1e-10)
+    np.testing.assert_allclose(e["root_velocity"], np.sum(dv ** 2, axis=1) + 0.1 * np.sum(dw ** 2, axis=1), rtol=1e-10)
+    assert np.all(angle > 1e-3)                         # the states differ: the test can fail
+
+
 def test_evaluate_a_policy_in_the_environment(gait_motions, tmp_path):
     demo = render.render_demonstration(gait_motions[("laikago", "trot")], "laikago", min_seconds=0.5)
     res = rollout.evaluate(lambda obs: np.zeros(12), "laikago", demo, episodes=2, seed=3, episode_seconds=1.0,

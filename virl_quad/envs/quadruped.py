@@ -213,6 +213,11 @@ class QuadrupedEnv(gym.Env):
         self._next_push = np.inf
         self._state: SimState | None = None
         self._kin = None
+        #: the reference at every demonstration step an episode can reach (a Trajectory, one row
+        #: per step), sampled in one batch at the first oracle reward: the reference at a step
+        #: never changes, and sampling it step by step (slerp, finite differences, foot
+        #: kinematics) cost more than the physics step
+        self._ref_table = None
         if cfg.oracle_reward:
             from virl_quad.kinematics import Kinematics
 
@@ -271,12 +276,12 @@ class QuadrupedEnv(gym.Env):
     def _oracle_reward(self, s: SimState) -> float:
         """motion_imitation's pose-imitation reward against the reference at the demo clock, mixed
         with the forward-speed term by ``oracle_speed_weight``."""
-        from virl_quad.evaluation.score import Trajectory, reference_trajectory, term_errors, term_rewards
+        from virl_quad.evaluation.score import Trajectory, term_errors, term_rewards
 
         traj = Trajectory(root_pos=s.base_pos[None], root_quat=s.base_quat[None], q=s.q[None], dq=s.dq[None],
                           root_lin_vel=s.base_lin_vel[None], root_ang_vel=s.base_ang_vel[None],
                           feet=self.world.foot_positions()[None])
-        ref = reference_trajectory(self.demo.motion, np.array([self.demo_step / self.demo.fps]), self._kin)
+        ref = self._reference_row(self.demo_step)
         total = float(term_rewards(term_errors(traj, ref, self._kin))["total"][0])
         w = self.cfg.oracle_speed_weight
         if w == 0.0:
@@ -284,6 +289,20 @@ class QuadrupedEnv(gym.Env):
         v = forward_speed(s.base_quat, s.base_lin_vel)
         v_ref = forward_speed(ref.root_quat[0], ref.root_lin_vel[0])
         return (1.0 - w) * total + w * speed_reward(v, v_ref)
+
+    def _reference_row(self, step: int):
+        """The reference motion at demonstration step ``step`` as a one-row Trajectory."""
+        from virl_quad.evaluation.score import Trajectory, reference_trajectory
+
+        if self._ref_table is None:
+            steps = np.arange(self.demo.num_frames + self.max_steps + 1)
+            self._ref_table = reference_trajectory(self.demo.motion, steps / self.demo.fps, self._kin)
+        if step >= len(self._ref_table):   # no time limit: past the table, sample the step alone
+            return reference_trajectory(self.demo.motion, np.array([step / self.demo.fps]), self._kin)
+        t = self._ref_table
+        return Trajectory(root_pos=t.root_pos[step:step + 1], root_quat=t.root_quat[step:step + 1],
+                          q=t.q[step:step + 1], dq=t.dq[step:step + 1], root_lin_vel=t.root_lin_vel[step:step + 1],
+                          root_ang_vel=t.root_ang_vel[step:step + 1], feet=t.feet[step:step + 1])
 
     def _push(self) -> None:
         angle = self.np_random.uniform(0, 2 * np.pi)

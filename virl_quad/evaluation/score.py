@@ -26,7 +26,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
 
@@ -56,10 +55,23 @@ class Trajectory:
         return len(self.root_pos)
 
 
-def _heading_inv(quat: np.ndarray) -> Rotation:
-    """Rotations that undo the heading (yaw of the base x axis) of quaternions (T, 4)."""
-    x = Rotation.from_quat(quat).apply([1.0, 0.0, 0.0])
-    return Rotation.from_euler("z", -np.arctan2(x[:, 1], x[:, 0])[:, None])
+def _headings(quat: np.ndarray) -> np.ndarray:
+    """Headings (rad): the yaw of each base x axis on the ground, for quaternions (T, 4) xyzw."""
+    x, y, z, w = quat[:, 0], quat[:, 1], quat[:, 2], quat[:, 3]
+    return np.arctan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _unturn(v: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Vectors (T, ..., 3) in the frame turned by ``heading`` (T,) rad about z (the heading undone)."""
+    c, s = np.cos(heading), np.sin(heading)
+    c, s = c.reshape(c.shape + (1,) * (v.ndim - 2)), s.reshape(s.shape + (1,) * (v.ndim - 2))
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
+
+
+def _angles(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Angles (rad) of the rotations between unit quaternions (T, 4): 2 atan2(|sin|, |cos|) of half."""
+    d = np.abs(np.sum(q1 * q2, axis=1) / (np.linalg.norm(q1, axis=1) * np.linalg.norm(q2, axis=1)))
+    return 2.0 * np.arctan2(np.sqrt(np.maximum(0.0, 1.0 - d * d)), d)
 
 
 def _feet(traj: Trajectory, kin) -> np.ndarray:
@@ -85,14 +97,12 @@ def _sample(motion, times: np.ndarray) -> dict[str, np.ndarray]:
 
 def term_errors(traj: Trajectory, ref: Trajectory, kin) -> dict[str, np.ndarray]:
     """Per-step errors (see module doc) of ``traj`` against ``ref`` (same length)."""
-    hinv, hinv_ref = _heading_inv(traj.root_quat), _heading_inv(ref.root_quat)
-    feet = _feet(traj, kin) - traj.root_pos[:, None, :]
-    feet_ref = _feet(ref, kin) - ref.root_pos[:, None, :]
-    local = np.stack([hinv.apply(feet[:, k]) for k in range(4)], axis=1)
-    local_ref = np.stack([hinv_ref.apply(feet_ref[:, k]) for k in range(4)], axis=1)
-    angle = (Rotation.from_quat(ref.root_quat).inv() * Rotation.from_quat(traj.root_quat)).magnitude()
-    dv = hinv.apply(traj.root_lin_vel) - hinv_ref.apply(ref.root_lin_vel)
-    dw = hinv.apply(traj.root_ang_vel) - hinv_ref.apply(ref.root_ang_vel)
+    h, h_ref = _headings(np.asarray(traj.root_quat, float)), _headings(np.asarray(ref.root_quat, float))
+    local = _unturn(_feet(traj, kin) - traj.root_pos[:, None, :], h)
+    local_ref = _unturn(_feet(ref, kin) - ref.root_pos[:, None, :], h_ref)
+    angle = _angles(np.asarray(ref.root_quat, float), np.asarray(traj.root_quat, float))
+    dv = _unturn(traj.root_lin_vel, h) - _unturn(ref.root_lin_vel, h_ref)
+    dw = _unturn(traj.root_ang_vel, h) - _unturn(ref.root_ang_vel, h_ref)
     return {
         "pose": np.sum((traj.q - ref.q) ** 2, axis=1),
         "velocity": np.sum((traj.dq - ref.dq) ** 2, axis=1),
