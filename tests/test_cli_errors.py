@@ -47,3 +47,16 @@ def test_bad_input_is_one_error_line_and_exit_2(module: str, args: list[str], me
     assert len(lines) == 1 and lines[0].startswith("error: "), p.stderr[-1500:]
     assert message in lines[0], lines[0]
     assert not any(tmp_path.iterdir()), list(tmp_path.iterdir())   # nothing made on the way to the error
+
+
+@pytest.mark.parametrize("module, args", [("virl_quad.train", ["--init-std", "5"]),
+                                          ("virl_quad.compare", ["--confusion", "trot,trot"])])
+def test_bad_options_are_refused_before_torch_and_the_simulator_load(module: str, args: list[str],
+                                                                    tmp_path: Path) -> None:
+    """A mistyped option is answered at once: nothing heavy is imported on the way to the error."""
+    p = subprocess.run([sys.executable, "-X", "importtime", "-m", module, *args], capture_output=True, text=True,
+                       timeout=120, cwd=tmp_path)
+    assert p.returncode == 2, p.stderr[-1500:]
+    imported = {line.rsplit("|", 1)[-1].strip() for line in p.stderr.splitlines() if line.startswith("import time:")}
+    assert "virl_quad" in imported                      # the probe sees the imports
+    assert not {"torch", "pybullet", "pinocchio", "rsl_rl"} & imported, sorted(imported & {"torch", "pybullet"})

@@ -104,17 +104,19 @@ def matrix_plot(path: Path, gaits: list[str], matrix: np.ndarray) -> None:
 
 def run_confusion(args, out: Path) -> int:
     """Train (or reuse) VIRL on each gait of ``args.confusion``, score each against each, write the matrix."""
+    from virl_quad.compare import refuse_unfinished
+
+    motions = parse_gaits(args.confusion, args.robot)     # bad lists refused before the heavy imports
+    gaits = list(motions)
+    refuse_unfinished([out / Path(g).stem for g in gaits])
+
     from virl_quad import demo as demo_lib
     from virl_quad import robots
-    from virl_quad.compare import refuse_unfinished
-    from virl_quad.schedule import Job, train_all
     from virl_quad.export import export
     from virl_quad.kinematics import Kinematics
     from virl_quad.policy_io import load_policy
+    from virl_quad.schedule import Job, train_all
 
-    motions = parse_gaits(args.confusion, args.robot)
-    gaits = list(motions)
-    refuse_unfinished([out / Path(g).stem for g in gaits])
     out.mkdir(parents=True, exist_ok=True)
     print(f"confusion of {', '.join(gaits)} on {args.robot}, VIRL at {args.minutes:g} min each; "
           f"results in {out}", flush=True)

@@ -21,10 +21,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from virl_quad.cli import UserError, dataclass_from_args, options, parser_from_dataclass, replace_options, run_main
-from virl_quad.training import checkpoint
 from virl_quad.training.config import FRAMELESS_REWARDS, TrainArgs, from_dict, prior_pull, rsl_rl_config, to_dict, validate
 
 
@@ -46,6 +44,8 @@ LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0, "video_spe
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
     """Apply --resume (saved config + explicitly typed options) and pick the run folder."""
+    from virl_quad.training import checkpoint
+
     if args.run.resume:
         run_dir = Path(args.run.resume)
         if not run_dir.is_dir():
@@ -126,6 +126,8 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Pa
     """The env options that define the policy's actions: a resumed run's own (its checkpoint's
     contract), else the robot's defaults with ``--tg``'s trajectory generator (``--prior-from``:
     fitted to the demonstration video, or to its reference motion)."""
+    from virl_quad.training import checkpoint
+
     if resume_data is not None:
         return checkpoint.contract_of(resume_data, args.run.robot).env_overrides()
     if not args.prior.tg:
@@ -220,8 +222,9 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
 def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     """Train (or resume), then write report.json, the exported policy and the side-by-side video."""
     t_start = time.time()                          # --minutes counts from here: prior fit and warm start included
+    validate(args)                                 # the typed options, before torch and the simulator load
     args, run_dir, data = _resolve(args, explicit)
-    validate(args)
+    validate(args)                                 # with --resume: the saved options and the typed ones
     reanchor = data is not None and "prior_pull" in explicit
     if reanchor and prior_pull(args) > 0 and (data.get("anchor") or {}).get("weights") is None:
         raise UserError(f"--prior-pull {prior_pull(args):g}: {run_dir} keeps no warm start to pull towards "
@@ -233,6 +236,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         from virl_quad.envs.ray_workers import check_address
 
         check_address(args.env.ray_address)           # at once, not after the prior fit
+    import torch
+
     if args.run.device.startswith("cuda") and not torch.cuda.is_available():
         raise UserError("--device cuda asked for, but torch sees no CUDA device")
     torch.manual_seed(args.run.seed)
