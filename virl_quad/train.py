@@ -224,7 +224,8 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
     t_start = time.time()                          # --minutes counts from here: prior fit and warm start included
     validate(args)                                 # the typed options, before torch and the simulator load
     args, run_dir, data = _resolve(args, explicit)
-    validate(args)                                 # with --resume: the saved options and the typed ones
+    if data is not None:
+        validate(args)                             # a resumed run: its saved options with the typed ones
     reanchor = data is not None and "prior_pull" in explicit
     if reanchor and prior_pull(args) > 0 and (data.get("anchor") or {}).get("weights") is None:
         raise UserError(f"--prior-pull {prior_pull(args):g}: {run_dir} keeps no warm start to pull towards "
