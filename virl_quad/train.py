@@ -39,8 +39,7 @@ def _explicit_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[s
 
 #: Options added after runs were made, with the value that reproduces those runs on resume. Saved
 #: options that no longer exist (retired features) are dropped on resume.
-LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0, "video_speed_weight": 0.0,
-                             "alive_bonus": 0.0}
+LEGACY: dict[str, object] = {"tg": False, "oracle_speed_weight": 0.0, "video_speed_weight": 0.0}
 
 
 def _resolve(args: TrainArgs, explicit: set[str]) -> tuple[TrainArgs, Path, dict | None]:
@@ -208,8 +207,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, dist.reward_updates, args.run.seed,
                                args.run.device, lr=dist.reward_lr, cyclic=demo.loop, w_d=dist.reward_wd,
                                other_clips=_other_clips(args, run_dir), adversarial_weight=dist.adversarial_weight,
-                               fps=demo.fps, video_speed_weight=dist.video_speed_weight,
-                               alive_bonus=dist.alive_bonus)
+                               fps=demo.fps, video_speed_weight=dist.video_speed_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),

@@ -108,10 +108,6 @@ class DistanceOptions:
         "exp(-((v - v_demo) / |v_demo|)^2). The distance model paints the ground out and cannot see "
         "travel; without this a gait that drifts backwards scores as one that walks. Needs a patterned "
         "ground (--ground checker): off, with a line, where the demonstration shows none. 0: none")
-    alive_bonus: float = opt(0.0,
-        "reward per control step the robot is up, added to a learned reward (its steps pay (0, 1]): "
-        "keeps staying up worth something to PPO when the distance model tells every agent frame from "
-        "the demonstration's and its reward falls towards 0. 0: none")
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
         "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")
@@ -208,8 +204,6 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --ground {args.env.ground!r}; choose one of: {', '.join(GROUNDS)}")
     if not 0 <= args.distance.video_speed_weight <= 1:
         raise ValueError(f"--video-speed-weight must lie in [0, 1], got {args.distance.video_speed_weight}")
-    if not 0 <= args.distance.alive_bonus <= 1:
-        raise ValueError(f"--alive-bonus must lie in [0, 1], got {args.distance.alive_bonus}")
     if args.distance.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.distance.adversarial_weight}")
     if args.run.minutes < 0 or args.env.episode_seconds <= 0 or args.eval.eval_seconds <= 0:

@@ -8,8 +8,7 @@ returns the rollout's rewards [T, N] (``finish``):
   agent/expert frames in the distance model's dataset, runs M updates, then
   recomputes every reward of the rollout with the updated model; a share of it
   (``video_speed_weight``) pays for travelling as fast as the demonstration, the
-  ground's slide measured in both videos (:mod:`virl_quad.reward.egomotion`), and a constant
-  ``alive_bonus`` per step is added;
+  ground's slide measured in both videos (:mod:`virl_quad.reward.egomotion`);
 - :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
   pose-imitation reward, the upper bound of the comparison);
 - :class:`SurvivalReward`: 1 per step the robot is up (``prior``: no imitation reward at all,
@@ -46,14 +45,13 @@ class LearnedReward:
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
                  cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 fps: float = 50.0, video_speed_weight: float = 0.0, alive_bonus: float = 0.0) -> None:
+                 fps: float = 50.0, video_speed_weight: float = 0.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig.make(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.speed, self.speed_weight, self.speed_note = None, float(video_speed_weight), ""
         if self.speed_weight > 0:
             self.speed, self.speed_note = _speed_term(demo_frames, fps, num_envs, self.speed_weight)
-        self.alive_bonus = float(alive_bonus)
         self.updates = updates
         self.num_envs = num_envs
         self.state = self.model.stream_state(num_envs)
@@ -87,9 +85,6 @@ class LearnedReward:
             if bool(valid.any()):
                 info["video_speed/ratio"] = float(shift[valid].mean()) / self.speed.target
                 info["video_speed/reward"] = float(r_speed[valid].mean())
-        if self.alive_bonus > 0:
-            info["reward/imitation"] = float(rewards.mean())
-            rewards = rewards + self.alive_bonus
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
