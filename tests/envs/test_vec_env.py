@@ -117,3 +117,28 @@ def test_the_robot_spec_object_reaches_the_workers() -> None:
         assert torch.isfinite(obs["policy"]).all()
     finally:
         env.close()
+
+
+def test_an_env_worker_does_not_load_torch(tmp_path) -> None:
+    """A spawned worker unpickles its arguments (a demonstration, a trajectory generator) and
+    steps its envs without torch: importing it would cost every worker about 2 s at start."""
+    import pickle
+    import subprocess
+    import sys
+
+    from virl_quad import demo as demo_lib
+    from virl_quad import robots
+    from virl_quad.motion.gaits import gait_params
+    from virl_quad.training.prior import gait_tg
+
+    spec = robots.get("pupper")
+    overrides = {"demo": demo_lib.load("trot", "pupper"), "tg": gait_tg(spec, gait_params("pupper", "trot")),
+                 "randomize": True}
+    args = tmp_path / "args.pkl"
+    args.write_bytes(pickle.dumps(("pupper", [0, 1], 0, overrides)))
+    code = ("import pickle, sys\nimport numpy as np\nfrom virl_quad.envs.workers import Slice\n"
+            f"s = Slice(*pickle.loads(open({str(args)!r}, 'rb').read()))\n"
+            "s.reset_all()\ns.step(np.zeros((2, 14)), np.zeros(2, bool))\nprint('torch' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "False"

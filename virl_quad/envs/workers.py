@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import signal
+import sys
 import traceback
 
 import numpy as np
-import torch
 
 from virl_quad.envs import make
 from virl_quad.robots.spec import RobotSpec
@@ -90,9 +90,10 @@ def _worker(conn, robot: str | RobotSpec, env_ids: list[int], seed: int, overrid
     """Worker process loop: build a slice, then serve commands until 'close'. Ctrl-C is the
     parent's to handle (it checkpoints and closes the workers): a worker ignores SIGINT."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    torch.set_num_threads(1)
     try:
         sl = Slice(robot, env_ids, seed, overrides)
+        if "torch" in sys.modules:      # not loaded by the envs (2 s a worker); where it is, one thread
+            sys.modules["torch"].set_num_threads(1)
         conn.send(("ok", None))
     except Exception as exc:  # report construction errors to the parent, one line
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
