@@ -207,8 +207,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
         source = LearnedReward(args.run.reward, demo.frames, args.env.num_envs, dist.reward_updates, args.run.seed,
                                args.run.device, lr=dist.reward_lr, cyclic=demo.loop, w_d=dist.reward_wd,
                                other_clips=_other_clips(args, run_dir), adversarial_weight=dist.adversarial_weight,
-                               fps=demo.fps, video_speed_weight=dist.video_speed_weight,
-                               speed_mix=dist.video_speed_mix)
+                               fps=demo.fps, video_speed_weight=dist.video_speed_weight)
 
     actions = env.contract.env_overrides()        # the run's own action facts (TG included)
     runner = VirlRunner(env, rsl_rl_config(args), source, run_dir, to_dict(args),
@@ -307,7 +306,7 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
     t0 = time.time()
     gait = Path(str(args.run.demo)).stem.removeprefix("gait:")
     source = runner.reward_source
-    speed = (source.speed_weight, source.speed, source.speed_mix) if source.speed is not None else None
+    speed = (source.speed_weight, source.speed) if source.speed is not None else None
     runner.alignment_probe = AlignmentProbe(args.run.robot, demo, gait, randomize=args.env.randomize,
                                             ground=args.env.ground, speed=speed)
     first = runner.alignment_probe.probe(model)

@@ -30,7 +30,7 @@ def test_a_reward_that_ranks_nothing_aligns_zero() -> None:
     demo = demo_lib.load("trot", "pupper")
     probe = AlignmentProbe.__new__(AlignmentProbe)
     probe.rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=0.5)
-    probe.speed_weight, probe.speed, probe.speed_mix, probe._speed_steps = 0.0, None, "add", None
+    probe.speed_weight, probe.speed, probe._speed_rewards = 0.0, None, None
     for r in probe.rollouts:                    # every rollout shows the demonstration itself: one reward for all
         r.agent = r.expert = np.asarray(demo.frames[:len(r.agent)])
     model = build_reward(RewardConfig(), demo.frames, [], 0, "cpu")
@@ -40,7 +40,7 @@ def test_a_reward_that_ranks_nothing_aligns_zero() -> None:
 
 def test_with_the_video_speed_term_the_probe_ranks_the_mixed_reward() -> None:
     from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, clip_window, ground_levels
-    from virl_quad.training.alignment import rollout_rewards, speed_rewards, speed_steps, step_rewards
+    from virl_quad.training.alignment import rollout_rewards, speed_rewards
 
     demo = demo_lib.load("trot", "pupper")
     levels = ground_levels(demo.frames)
@@ -50,26 +50,10 @@ def test_with_the_video_speed_term_the_probe_ranks_the_mixed_reward() -> None:
     probe.rollouts = record("pupper", demo, "trot", seeds=(0,), seconds=1.5, randomize=False)
     speed = dict(zip((r.controller for r in probe.rollouts), speed_rewards(term, probe.rollouts)))
     assert speed["tracker, alpha 1"] > 0.5 > speed["standing still"]     # the tracker walks, standing does not
-    probe.speed_weight, probe.speed, probe.speed_mix = 0.3, term, "add"
-    probe._speed_steps = speed_steps(term, probe.rollouts)
+    probe.speed_weight, probe.speed, probe._speed_rewards = 0.3, term, np.nan_to_num(list(speed.values()))
     model = build_reward(RewardConfig(), demo.frames, [], 0, "cpu")
     out = probe.probe(model)
     assert out["distance_alignment"] == alignment(model, probe.rollouts)[0]
     alone = dict(zip((r.controller for r in probe.rollouts), rollout_rewards(model, probe.rollouts)))
     assert out["reward_standing"] == pytest.approx(0.7 * alone["standing still"] + 0.3 * speed["standing still"])
     assert -1.0 <= out["reward_alignment"] <= 1.0
-    probe.speed_mix = "scale"                                # the speed scales the distance's reward, step by step
-    i = [r.controller for r in probe.rollouts].index("standing still")
-    r, (s, valid) = step_rewards(model, probe.rollouts)[i], probe._speed_steps[i]
-    assert bool(valid.all())
-    assert probe.probe(model)["reward_standing"] == pytest.approx(float((r * (0.7 + 0.3 * s)).mean()))
-
-
-def test_mix_speed_adds_or_scales_where_the_term_applies() -> None:
-    import torch
-
-    from virl_quad.training.rewards import mix_speed
-
-    r, s, valid = torch.tensor([0.5, 0.1, 0.8]), torch.tensor([1.0, 0.0, 0.2]), torch.tensor([True, True, False])
-    assert torch.allclose(mix_speed(r, s, valid, 0.3, "add"), torch.tensor([0.65, 0.07, 0.8]))
-    assert torch.allclose(mix_speed(r, s, valid, 0.3, "scale"), torch.tensor([0.5, 0.07, 0.8]))

@@ -97,21 +97,16 @@ def record(robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1)
     return out
 
 
-def step_rewards(model, rollouts: list[GradedRollout]) -> list[torch.Tensor]:
-    """Each rollout's per-step reward ``exp(w_d d^2)`` under a distance model (frames SKIP.., or
-    every frame of a rollout that ended, by a fall, before that)."""
-    out = []
+def rollout_rewards(model, rollouts: list[GradedRollout]) -> list[float]:
+    """Mean reward ``exp(w_d d^2)`` of each rollout under a distance model (frames SKIP.., or every
+    frame of a rollout that ended, by a fall, before that)."""
+    rewards = []
     with torch.no_grad():
         for r in rollouts:
             d = model.distance(torch.from_numpy(r.expert[:, None]), torch.from_numpy(r.agent[:, None]))[:, 0]
             d = d[SKIP:] if len(d) > SKIP else d
-            out.append(torch.exp(model.cfg.reward.w_d * d ** 2).cpu())
-    return out
-
-
-def rollout_rewards(model, rollouts: list[GradedRollout]) -> list[float]:
-    """Mean reward ``exp(w_d d^2)`` of each rollout under a distance model (see :func:`step_rewards`)."""
-    return [float(r.mean()) for r in step_rewards(model, rollouts)]
+            rewards.append(float(torch.exp(model.cfg.reward.w_d * d ** 2).mean()))
+    return rewards
 
 
 def alignment(model, rollouts: list[GradedRollout]) -> tuple[float, list[float]]:
@@ -121,25 +116,19 @@ def alignment(model, rollouts: list[GradedRollout]) -> tuple[float, list[float]]
     return _rank(rewards, rollouts), rewards
 
 
-def speed_steps(term, rollouts: list[GradedRollout]) -> list[tuple[torch.Tensor, torch.Tensor]]:
-    """Per rollout, the video speed term's reward and where it applies, frames :data:`SKIP`.. (a
-    :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`, whose target, levels and rate are used)."""
+def speed_rewards(term, rollouts: list[GradedRollout]) -> list[float]:
+    """Mean reward of the video speed term (a :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`,
+    whose target, levels and rate are used) over each rollout's frames from :data:`SKIP` on (NaN
+    where it never applies)."""
     from virl_quad.reward.egomotion import VideoSpeedTerm
 
     out = []
     for r in rollouts:
         fresh = VideoSpeedTerm(term.target, term.fps, term.levels, 1, term.k)
         reward, valid, _ = fresh.rollout(torch.from_numpy(r.agent[:, None]), torch.zeros(len(r.agent), 1, dtype=torch.bool))
-        first = SKIP if len(r.agent) > SKIP else 0
-        out.append((reward[first:, 0].cpu(), valid[first:, 0].cpu()))
+        reward, valid = reward[SKIP:, 0], valid[SKIP:, 0]
+        out.append(float(reward[valid].mean()) if bool(valid.any()) else float("nan"))
     return out
-
-
-def speed_rewards(term, rollouts: list[GradedRollout]) -> list[float]:
-    """Mean reward of the video speed term over each rollout's frames from :data:`SKIP` on (NaN
-    where it never applies)."""
-    return [float(reward[valid].mean()) if bool(valid.any()) else float("nan")
-            for reward, valid in speed_steps(term, rollouts)]
 
 
 def _rank(rewards: list[float], rollouts: list[GradedRollout]) -> float:
@@ -151,36 +140,27 @@ def _rank(rewards: list[float], rollouts: list[GradedRollout]) -> float:
 class AlignmentProbe:
     """The probe as training uses it: rollouts recorded at construction, ``probe(model)`` after.
 
-    ``speed``: (weight, :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`, mix) when the training
-    reward joins in the video speed term (mix: ``add`` or ``scale``, see
-    :func:`~virl_quad.training.rewards.mix_speed`); the probe then ranks that joined reward, step
-    by step as training computes it, and reports the distance model's own ranking beside it."""
+    ``speed``: (weight, :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`) when the training
+    reward mixes in the video speed term; the probe then ranks that mixed reward (what the policy
+    is trained on) and reports the distance model's own ranking beside it."""
 
     def __init__(self, robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1),
                  seconds: float = 4.0, randomize: bool = True, ground: str = "checker",
-                 speed: tuple | None = None) -> None:
+                 speed: tuple[float, object] | None = None) -> None:
         self.rollouts = record(robot, demo, gait, seeds, seconds, randomize, ground)
-        self.speed_weight, self.speed, self.speed_mix = 0.0, None, "add"
-        self._speed_steps = None
-        if speed is not None:
-            self.speed_weight, self.speed = float(speed[0]), speed[1]
-            self.speed_mix = speed[2] if len(speed) > 2 else "add"
-            self._speed_steps = speed_steps(self.speed, self.rollouts)
+        self.speed_weight, self.speed = (0.0, None) if speed is None else (float(speed[0]), speed[1])
+        self._speed_rewards = None if self.speed is None else np.nan_to_num(speed_rewards(self.speed, self.rollouts))
 
     def probe(self, model) -> dict[str, float]:
         """``{"reward_alignment": rho, "reward_best": mean reward of the best-scored controller,
-        "reward_standing": of standing still}`` under ``model`` (with the speed term: of the joined
+        "reward_standing": of standing still}`` under ``model`` (with the speed term: of the mixed
         reward, and ``distance_alignment``, the model's own rho)."""
-        from virl_quad.training.rewards import mix_speed
-
-        steps = step_rewards(model, self.rollouts)
-        rewards = [float(r.mean()) for r in steps]
-        rho = _rank(rewards, self.rollouts)
+        rho, rewards = alignment(model, self.rollouts)
         out = {}
-        if self._speed_steps is not None:
+        if self._speed_rewards is not None:
             out["distance_alignment"] = rho
-            rewards = [float(mix_speed(r, s, v, self.speed_weight, self.speed_mix).mean())
-                       for r, (s, v) in zip(steps, self._speed_steps)]
+            w = self.speed_weight
+            rewards = list((1 - w) * np.asarray(rewards) + w * self._speed_rewards)
             rho = _rank(rewards, self.rollouts)
         by = _by_controller(self.rollouts, rewards)
         best = max(by, key=lambda name: by[name][1])

@@ -16,7 +16,6 @@ REWARDS = ("virl", "frame", "sequence", "no_ae", "gaifo", "oracle", "prior")
 #: rewards that need no frames: the env's ground-truth score (oracle) or survival alone (prior)
 FRAMELESS_REWARDS = ("oracle", "prior")
 PRIOR_SOURCES = ("video", "motion")
-SPEED_MIXES = ("add", "scale")
 #: where env workers run (the backends of virl_quad.envs.vec_env, which this module does not
 #: import: it would load the simulator)
 WORKER_KINDS = ("local", "ray")
@@ -109,10 +108,6 @@ class DistanceOptions:
         "exp(-((v - v_demo) / |v_demo|)^2). The distance model paints the ground out and cannot see "
         "travel; without this a gait that drifts backwards scores as one that walks. Needs a patterned "
         "ground (--ground checker): off, with a line, where the demonstration shows none. 0: none")
-    video_speed_mix: str = opt("add",
-        "how the speed term joins the distance model's reward r: add ((1 - w) r + w s) or scale "
-        "(r ((1 - w) + w s): the distance keeps the ranking of behaviours when r is small for all of "
-        "them, the speed scales it)", choices=SPEED_MIXES)
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
         "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")
@@ -209,9 +204,6 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --ground {args.env.ground!r}; choose one of: {', '.join(GROUNDS)}")
     if not 0 <= args.distance.video_speed_weight <= 1:
         raise ValueError(f"--video-speed-weight must lie in [0, 1], got {args.distance.video_speed_weight}")
-    if args.distance.video_speed_mix not in SPEED_MIXES:
-        raise ValueError(f"unknown --video-speed-mix {args.distance.video_speed_mix!r}; choose one of: "
-                         f"{', '.join(SPEED_MIXES)}")
     if args.distance.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.distance.adversarial_weight}")
     if args.run.minutes < 0 or args.env.episode_seconds <= 0 or args.eval.eval_seconds <= 0:

@@ -45,12 +45,11 @@ class LearnedReward:
     def __init__(self, variant: str, demo_frames: np.ndarray, num_envs: int, updates: int, seed: int,
                  device: str = "cpu", other_clips: list[np.ndarray] | None = None, lr: float = 1e-3,
                  cyclic: bool = False, w_d: float = -5.0, adversarial_weight: float = 1.0,
-                 fps: float = 50.0, video_speed_weight: float = 0.0, speed_mix: str = "add") -> None:
+                 fps: float = 50.0, video_speed_weight: float = 0.0) -> None:
         weights = {} if adversarial_weight == 1.0 else {"expert_vs_agent": float(adversarial_weight)}
         cfg = RewardConfig.make(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.speed, self.speed_weight, self.speed_note = None, float(video_speed_weight), ""
-        self.speed_mix = speed_mix
         if self.speed_weight > 0:
             self.speed, self.speed_note = _speed_term(demo_frames, fps, num_envs, self.speed_weight)
         self.updates = updates
@@ -81,8 +80,8 @@ class LearnedReward:
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
         if self.speed is not None:
             r_speed, valid, shift = self.speed.rollout(agent, dones)
-            rewards = mix_speed(rewards, r_speed.to(rewards.device), valid.to(rewards.device), self.speed_weight,
-                                self.speed_mix)
+            w = self.speed_weight
+            rewards = torch.where(valid.to(rewards.device), (1 - w) * rewards + w * r_speed.to(rewards.device), rewards)
             if bool(valid.any()):
                 info["video_speed/ratio"] = float(shift[valid].mean()) / self.speed.target
                 info["video_speed/reward"] = float(r_speed[valid].mean())
@@ -97,14 +96,6 @@ class LearnedReward:
     def load_state_dict(self, d: dict) -> None:
         """Restore the distance model and optimiser (an older version's rollout count is ignored)."""
         self.model.load_state_dict(d)
-
-
-def mix_speed(rewards: torch.Tensor, speed: torch.Tensor, valid: torch.Tensor, weight: float,
-              mix: str = "add") -> torch.Tensor:
-    """The learned reward with the video speed term joined in (``--video-speed-mix``): where the
-    term applies (``valid``), ``add``: (1 - w) r + w s; ``scale``: r ((1 - w) + w s); elsewhere r."""
-    joined = (1 - weight) * rewards + weight * speed if mix == "add" else rewards * ((1 - weight) + weight * speed)
-    return torch.where(valid, joined, rewards)
 
 
 def _speed_term(demo_frames: np.ndarray, fps: float, num_envs: int, weight: float) -> tuple[VideoSpeedTerm | None, str]:
