@@ -48,6 +48,27 @@ def test_a_rendered_gait_fits_its_own_phase_pattern(gait: str) -> None:
     assert TGParams.from_dict(report["finalists"][0]["tg"]) == params       # as prior_fit.json records it
 
 
+def test_a_pool_of_processes_renders_what_one_process_renders() -> None:
+    from dataclasses import replace
+
+    from virl_quad.training.synthesis import RenderPool, Synthesizer
+    from virl_quad.training.video_prior import template
+
+    trot = template(PUPPER)
+    candidates = [trot, replace(trot, duty=0.4, swing_height=0.045), replace(trot, step_length=0.9)]  # last: out of reach
+    with RenderPool(PUPPER, workers=2) as pool:
+        assert pool.workers == 2
+        renders = pool.render_many(candidates, 12)
+    synth = Synthesizer(PUPPER)
+    try:
+        for params, got in zip(candidates[:2], renders):
+            assert got.shape == (12, 48, 48) and np.array_equal(got, synth.render(params, 12))
+    finally:
+        synth.close()
+    assert renders[2] is None
+    assert not np.array_equal(renders[0], renders[1])
+
+
 def test_same_pattern_ignores_the_global_phase() -> None:
     assert same_pattern((0.25, 0.75, 0.75, 0.25), PHASE_OFFSETS["trot"])
     assert not same_pattern(PHASE_OFFSETS["pace"], PHASE_OFFSETS["trot"])

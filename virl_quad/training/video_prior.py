@@ -13,7 +13,8 @@ like the demonstration video, found without the demonstration's reference motion
    period found and twice it.
 2. **Candidates**: TG parameters rendered with no physics by the env's own camera (the base
    moving forward at the TG's stance speed, at the height where stance feet touch the
-   ground), as silhouettes, compared with the video's at the best time shift (the global
+   ground; :mod:`virl_quad.training.synthesis`, each stage's candidates on every core at
+   once), as silhouettes, compared with the video's at the best time shift (the global
    phase is unknown: leg FR stays at phase 0 and the shift finds the rest) by the mean
    absolute gray difference. That distance is graded, a near miss nearer than a far one,
    which a contrastive distance model is not: it pushes every pair that differs beyond its
@@ -41,8 +42,9 @@ from typing import Callable
 import numpy as np
 import torch
 
-from virl_quad.policy.tg import TGParams, TrajectoryGenerator
+from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import RobotSpec
+from virl_quad.training.synthesis import RenderPool
 
 GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
 MIN_PERIODICITY = 0.3       # below this the video shows no periodic motion (1: exactly periodic)
@@ -106,39 +108,6 @@ def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
     return period, float(max(0.0, 1.0 - diff[i] / (2.0 * var)))
 
 
-class Synthesizer:
-    """Kinematic renders of a TG on one robot with the env's camera and ground (no physics)."""
-
-    def __init__(self, spec: RobotSpec) -> None:
-        from virl_quad.sim.camera import CameraParams
-        from virl_quad.sim.world import World
-
-        self.spec = spec
-        self.cam = CameraParams.from_spec(spec)
-        self.world = World(spec, ground="plain")        # painted out by silhouettes() anyway
-
-    def render(self, params: TGParams, num_frames: int) -> np.ndarray | None:
-        """Silhouettes (num_frames, 48, 48) uint8 of the TG played from phase 0 at the control
-        rate, or None when its feet are out of the robot's reach."""
-        try:
-            tg = TrajectoryGenerator(self.spec, params)
-        except ValueError:
-            return None
-        t = np.arange(num_frames) / self.spec.control_hz                      # s
-        q = self.spec.clip_to_limits(tg.joint_targets((t * params.frequency)[:, None]))
-        speed = params.step_length * params.frequency / params.duty           # m/s, stance feet at rest
-        base_z = self.spec.foot_radius - float(np.mean(tg.stance_z))          # m, stance feet on the ground
-        out = np.empty((num_frames, 48, 48), np.uint8)
-        for i in range(num_frames):
-            self.world.set_pose(np.array([speed * t[i], 0.0, base_z]), np.array([0.0, 0.0, 0.0, 1.0]), q[i])
-            out[i] = self.world.render(cam=self.cam)
-        return silhouettes(out)
-
-    def close(self) -> None:
-        """Release the physics client."""
-        self.world.close()
-
-
 def template(spec: RobotSpec) -> TGParams:
     """The starting TG: the robot's built-in trot (stance height, swing height, speed)."""
     from virl_quad.motion.gaits import gait_params
@@ -170,24 +139,29 @@ class _Scorer:
     """Distance of candidate renders to the video's silhouettes: the mean absolute difference
     (gray levels / 255) at the best time shift."""
 
-    def __init__(self, video: np.ndarray, synth: Synthesizer, shifts: int) -> None:
-        self.video, self.synth, self.shifts = video, synth, shifts
+    def __init__(self, video: np.ndarray, renders: RenderPool, shifts: int) -> None:
+        self.video, self.renders, self.shifts = video, renders, shifts
         self.video_f = torch.from_numpy(video).float() / 255.0
         self.cache: dict[TGParams, tuple[float, int, np.ndarray | None]] = {}
+
+    def prefetch(self, candidates: list[TGParams]) -> None:
+        """Render and score the candidates not scored yet, all at once (on the pool's processes)."""
+        todo = list(dict.fromkeys(p for p in candidates if p not in self.cache))
+        n = len(self.video)
+        for params, raw in zip(todo, self.renders.render_many(todo, n + self.shifts)):
+            if raw is None:
+                self.cache[params] = (math.inf, 0, None)
+                continue
+            frames = silhouettes(raw)
+            f = torch.from_numpy(frames).float() / 255.0
+            costs = torch.stack([(self.video_f - f[s:s + n]).abs().mean() for s in range(self.shifts)])
+            s = int(torch.argmin(costs))
+            self.cache[params] = (float(costs[s]), s, frames)
 
     def cost(self, params: TGParams) -> tuple[float, int, np.ndarray | None]:
         """(distance at the best shift, that shift in frames, the render) of a candidate; inf
         for one out of reach."""
-        if params not in self.cache:
-            n = len(self.video)
-            frames = self.synth.render(params, n + self.shifts)
-            if frames is None:
-                self.cache[params] = (math.inf, 0, None)
-            else:
-                f = torch.from_numpy(frames).float() / 255.0
-                costs = torch.stack([(self.video_f - f[s:s + n]).abs().mean() for s in range(self.shifts)])
-                s = int(torch.argmin(costs))
-                self.cache[params] = (float(costs[s]), s, frames)
+        self.prefetch([params])
         return self.cache[params]
 
 
@@ -198,13 +172,16 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
     grid = [(0.0,) + o for o in itertools.product((0.0, 0.25, 0.5, 0.75), repeat=3)]
     pool = [candidate(base, fps / p, o, d, speed0, base.swing_height)
             for p in periods for o in grid for d in cfg.grid_duties]
+    scorer.prefetch(pool)
     pool.sort(key=cost)
     best_patterns = pool[:cfg.top_patterns]
     pool = [candidate(p, p.frequency, p.offsets, d, speed0, base.swing_height) for p in best_patterns for d in cfg.duties]
+    scorer.prefetch(pool)
     pool = sorted(pool, key=cost)
     best = pool[0]
     sized = [candidate(best, best.frequency, best.offsets, best.duty, speed0 * v, base.swing_height * w)
              for v in cfg.speed_scales for w in cfg.swing_scales]
+    scorer.prefetch(sized)
     best = min(sized, key=cost)
     for _ in range(2):                                                             # each leg's offset in eighths
         for leg in (1, 2, 3):
@@ -213,15 +190,18 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
                 o = list(best.offsets)
                 o[leg] = (o[leg] + step) % 1.0
                 trial.append(replace(best, offsets=tuple(o)))
+            scorer.prefetch(trial)
             best = min(trial, key=cost)
     ranked = sorted(set(pool + sized + [best]), key=cost)
     return ranked[:cfg.finalists]
 
 
 def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoFitConfig = VideoFitConfig(),
-                    log: Callable[[str], None] | None = None) -> tuple[TGParams, dict, np.ndarray]:
+                    log: Callable[[str], None] | None = None,
+                    workers: int | None = None) -> tuple[TGParams, dict, np.ndarray]:
     """Fit TG parameters to a demonstration video (T, 48, 48) uint8 at ``fps`` (Hz), the robot's
-    control rate, seen by the env's camera.
+    control rate, seen by the env's camera. The candidates are rendered on ``workers`` processes
+    (None: one per CPU core; the fit is the same for any number).
 
     Returns ``(finalists, report, fitted)``: the best candidates' parameters, nearest first (the
     fit: ``finalists[0]``), the report, and each finalist's silhouettes (F, T, 48, 48) aligned with
@@ -244,12 +224,9 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
     if log:
         log(f"  prior fit: period {period:.2f} frames ({fps / period:.2f} Hz), periodicity {periodicity:.2f}; "
             f"trying {', '.join(f'{fps / p:.2f}' for p in periods)} Hz")
-    synth = Synthesizer(spec)
-    try:
-        scorer = _Scorer(frames, synth, int(math.ceil(max(periods))))
+    with RenderPool(spec, workers) as renders:
+        scorer = _Scorer(frames, renders, int(math.ceil(max(periods))))
         finalists = _search(scorer, template(spec), periods, fps, cfg)
-    finally:
-        synth.close()
     costs = [scorer.cost(p) for p in finalists]                                  # cached: no new renders
     report = {"period_frames": period, "periodicity": periodicity, "distance": costs[0][0],
               "candidates": len(scorer.cache), "seconds": time.time() - t0,
