@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from virl_quad.reward.frames import BORDER_ROWS, flat_levels
+from virl_quad.reward.frames import BORDER_ROWS, flat_levels, level_table
 
 WINDOW_S = 0.16      # s between the two frames compared (8 steps at Pupper's 50 Hz)
 MAX_DX = 8           # px, largest horizontal shift searched (the checker's period is ~20 px)
@@ -125,9 +125,9 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
     if a.shape != b.shape or a.ndim != 3:
         raise ValueError(f"expected two [M, H, W] frame stacks of one shape, got {list(a.shape)}, {list(b.shape)}")
-    lv = torch.as_tensor(levels, dtype=torch.int64)
-    fa, ma = _blur(a.to(torch.float32), torch.isin(a, lv))
-    fb, mb = _blur(b.to(torch.float32), torch.isin(b, lv))
+    table = torch.from_numpy(level_table(levels))                  # ground levels: True
+    fa, ma = _blur(a.to(torch.float32), table[a.clamp(0, 255)])
+    fb, mb = _blur(b.to(torch.float32), table[b.clamp(0, 255)])
     m_ = a.shape[0]
     cost = _shift_costs(fa, ma, fb, mb)
     rows = torch.arange(m_)

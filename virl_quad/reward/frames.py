@@ -114,18 +114,28 @@ def flat_levels(*strips: np.ndarray) -> np.ndarray:
     return np.unique(np.clip(lv[:, None] + np.arange(-TOLERANCE, TOLERANCE + 1)[None], 0, 255))
 
 
+def level_table(levels) -> np.ndarray:
+    """A 256-entry bool table, True at each of ``levels`` (gray levels 0-255): ``table[frames]``
+    is ``np.isin(frames, levels)`` for uint8 frames, at a fraction of its cost."""
+    table = np.zeros(256, dtype=bool)
+    table[np.asarray(levels, dtype=np.int64)] = True
+    return table
+
+
 def paint(frames: np.ndarray, levels: np.ndarray) -> np.ndarray:
     """uint8 frames with every pixel at one of ``levels`` (:func:`background_levels`) set to white
     (:data:`PAINT`): the robot's silhouette, with its shading, on a blank background."""
     frames = np.asarray(frames, dtype=np.uint8)
     if len(levels) == 0:
         return frames.copy()
-    return np.where(np.isin(frames, levels), np.uint8(PAINT), frames)
+    return np.where(level_table(levels)[frames], np.uint8(PAINT), frames)
 
 
 def paint_float(x: torch.Tensor, levels: torch.Tensor) -> torch.Tensor:
     """:func:`paint` for float frames in [0, 1] (levels as an int64 tensor on x's device)."""
     if levels.numel() == 0:
         return x
-    hit = torch.isin(torch.round(x * 255.0).to(torch.int64), levels)
+    table = torch.zeros(256, dtype=torch.bool, device=x.device)
+    table[levels] = True
+    hit = table[torch.round(x * 255.0).to(torch.int64).clamp_(0, 255)]
     return torch.where(hit, torch.full_like(x, PAINT / 255.0), x)
