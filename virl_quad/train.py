@@ -158,7 +158,9 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
 
     print("fitting the gait prior to the demonstration video ...", flush=True)
     say = lambda line: print(line, flush=True)
-    finalists, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec, log=say)
+    local = args.env.workers == "local" and args.env.num_workers > 0          # the user's process count
+    finalists, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec, log=say,
+                                                workers=args.env.num_workers if local else None)
     k = 0
     if args.prior.warm_start_rounds > 0:
         k, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,

@@ -55,8 +55,8 @@ class EnvOptions:
     """The simulated robots and where they run."""
 
     num_envs: int = opt(16, "parallel simulated robots")
-    num_workers: int = opt(-1, "env workers (-1: one per CPU core of this machine; with --workers ray, set it to "
-                                "the cluster's CPUs to use)")
+    num_workers: int = opt(-1, "env workers, and the video fit's render processes (-1: one per CPU core of this "
+                                "machine; with --workers ray, set it to the cluster's CPUs to use)")
     workers: str = opt("local",
         "where the env workers run: local (processes on this machine) or ray (Ray actors on the cluster "
         "at --ray-address; pip install -e \".[cluster]\")", choices=WORKER_KINDS)
