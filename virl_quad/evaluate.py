@@ -12,11 +12,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from virl_quad.cli import UserError, opt, parse, run_main
-from virl_quad.policy_io import LoadedPolicy, load_policy
+
+if TYPE_CHECKING:                                  # torch loads only once the options are good
+    from virl_quad.policy_io import LoadedPolicy
 
 
 def policy_callable(policy: LoadedPolicy):
@@ -47,12 +50,13 @@ class EvaluateArgs:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry."""
-    from virl_quad import demo as demo_lib
-    from virl_quad.evaluation.rollout import evaluate
-
     args = parse(EvaluateArgs, argv, __doc__.split("\n\n")[0], "python -m virl_quad.evaluate")
     if args.episodes < 1 or args.seconds <= 0:
         raise UserError("--episodes must be >= 1 and --seconds > 0")
+    from virl_quad import demo as demo_lib
+    from virl_quad.evaluation.rollout import evaluate
+    from virl_quad.policy_io import load_policy
+
     policy = load_policy(args.policy)
     robot = policy.spec.name
     source = args.demo or policy.meta.get("demo", {}).get("source") or "trot"
