@@ -135,7 +135,6 @@ def paint_float(x: torch.Tensor, levels: torch.Tensor) -> torch.Tensor:
     """:func:`paint` for float frames in [0, 1] (levels as an int64 tensor on x's device)."""
     if levels.numel() == 0:
         return x
-    table = torch.zeros(256, dtype=torch.bool, device=x.device)
-    table[levels] = True
+    table = torch.from_numpy(level_table(levels.cpu().numpy())).to(x.device)
     hit = table[torch.round(x * 255.0).to(torch.int64).clamp_(0, 255)]
     return torch.where(hit, torch.full_like(x, PAINT / 255.0), x)
