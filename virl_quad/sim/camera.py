@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from virl_quad.quiet import import_pybullet_quietly
@@ -45,10 +46,12 @@ class CameraParams:
 
 
 def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
-    """ITU-R BT.601 luma of an (H, W, 3|4) uint8 image, as uint8 (H, W)."""
-    rgb = rgb[..., :3].astype(np.float32)
-    gray = rgb[..., 0] * 0.299 + rgb[..., 1] * 0.587 + rgb[..., 2] * 0.114
-    return np.clip(gray + 0.5, 0, 255).astype(np.uint8)
+    """ITU-R BT.601 luma of an (H, W, 3|4) uint8 image, as uint8 (H, W): OpenCV's fixed-point
+    conversion (14-bit weights summing to exactly 1, so a gray pixel keeps its level; a coloured
+    one is within one level of the float formula), about 7x faster than numpy at 48x48."""
+    rgb = np.ascontiguousarray(rgb)
+    code = cv2.COLOR_RGBA2GRAY if rgb.shape[-1] == 4 else cv2.COLOR_RGB2GRAY
+    return cv2.cvtColor(rgb, code)
 
 
 def render(client: int, target: np.ndarray, cam: CameraParams, size: int = FRAME_SIZE,
@@ -65,8 +68,8 @@ def render(client: int, target: np.ndarray, cam: CameraParams, size: int = FRAME
     _, _, px, depth, _ = pybullet.getCameraImage(
         size, size, viewMatrix=view, projectionMatrix=proj, renderer=pybullet.ER_TINY_RENDERER,
         shadow=0, flags=pybullet.ER_NO_SEGMENTATION_MASK, physicsClientId=client)
-    img = np.asarray(px, dtype=np.uint8).reshape(size, size, 4)[..., :3]
-    img = img.copy() if rgb else rgb_to_gray(img)
+    img = np.asarray(px, dtype=np.uint8).reshape(size, size, 4)
+    img = img[..., :3].copy() if rgb else rgb_to_gray(img)
     if ground is not None:
         img = ground_mod.composite(img, np.asarray(depth).reshape(size, size), view, proj, ground)
     return img
