@@ -80,10 +80,15 @@ class _SliceActor:
 
 
 class RayActors:
-    """One slice per Ray actor (``address``: see :func:`connect`; ``prefix``: actor names)."""
+    """One slice per Ray actor (``address``: see :func:`connect`; ``prefix``: actor names); one
+    group of envs (``groups[0][w]``: actor ``w``'s env ids)."""
 
-    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict,
+    def __init__(self, robot: str | RobotSpec, groups: list[list[list[int]]], seed: int, overrides: dict,
                  address: str | None = None, prefix: str = "") -> None:
+        if len(groups) != 1:
+            raise ValueError(f"Ray actors hold one group of envs, got {len(groups)}")
+        ids = groups[0]
+        self._refs: list | None = None
         ray = _ray()
         connect(address)
         actor = ray.remote(num_cpus=1, max_restarts=0)(_SliceActor)
@@ -122,9 +127,19 @@ class RayActors:
                 raise RuntimeError(f"env worker failed: {type(cause).__name__}: {cause}") from None
         raise RuntimeError("env worker failed: Ray reported an error no actor holds")
 
-    def call(self, cmd: str, per_worker_args: list[tuple]) -> list:
+    def send(self, cmd: str, group: int, per_worker_args: list[tuple]) -> None:
+        """Ask every actor to run ``cmd`` (the actors run at once; returns at once)."""
+        self._refs = [a.call.remote(cmd, args) for a, args in zip(self.actors, per_worker_args)]
+
+    def gather(self, group: int) -> list:
+        """Every actor's result of the last :meth:`send`, in worker order."""
+        refs, self._refs = self._refs, None
+        return self._get(refs)
+
+    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
         """Every actor's result of ``cmd``, in worker order (the actors run at once)."""
-        return self._get([a.call.remote(cmd, args) for a, args in zip(self.actors, per_worker_args)])
+        self.send(cmd, group, per_worker_args)
+        return self.gather(group)
 
     def close(self) -> None:
         """Release the envs and end the actors (the cluster stays up)."""

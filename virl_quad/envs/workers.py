@@ -1,14 +1,17 @@
 """Where a vector env's slices of envs run: in this process or in worker processes on this host.
 
-A *slice* is a group of envs stepped together (:class:`Slice`). A backend holds one slice per
-worker and answers ``call(cmd, per_worker_args)`` with the list of the slices' results, in
-worker order:
+A *slice* is a group of envs stepped together (:class:`Slice`). The envs fall into *groups*
+that step independently (``groups[g][w]``: the ids of group ``g``'s envs on worker ``w``); a
+worker holds one slice per group. A backend answers ``call(cmd, group, per_worker_args)`` with
+the list of that group's slices' results, in worker order; ``send`` and ``gather`` split a call
+in two, so that one group steps while the caller works on the other's results (a worker runs
+its commands in the order sent):
 
-- :class:`InProcess`: one slice in this process (debugging, tests);
-- :class:`Processes`: one slice per ``multiprocessing`` worker (the default: two cores run two
-  slices at once);
+- :class:`InProcess`: the slices in this process (debugging, tests; ``send`` runs at once);
+- :class:`Processes`: each ``multiprocessing`` worker holds one slice per group (the default:
+  two cores run two workers at once);
 - :class:`virl_quad.envs.ray_workers.RayActors`: one slice per Ray actor, on any machine of a
-  Ray cluster (``pip install -e ".[cluster]"``).
+  Ray cluster (``pip install -e ".[cluster]"``; one group).
 
 Every backend builds the same envs with the same seeds (env ``i`` is seeded ``seed + i``), so
 the results do not depend on where the slices run.
@@ -70,28 +73,39 @@ def stack(dicts: list[dict]) -> dict:
 
 
 class InProcess:
-    """Every env in one slice in this process."""
+    """Every group's envs in one slice in this process."""
 
-    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict) -> None:
-        self.slice = Slice(robot, [i for chunk in ids for i in chunk], seed, overrides)
+    def __init__(self, robot: str | RobotSpec, groups: list[list[list[int]]], seed: int, overrides: dict) -> None:
+        self.slices = [Slice(robot, [i for chunk in g for i in chunk], seed, overrides) for g in groups]
+        self._results: dict[int, list] = {}
 
-    def call(self, cmd: str, per_worker_args: list[tuple]) -> list:
-        """The slice's result of ``cmd`` (one-element list)."""
-        return [getattr(self.slice, cmd)(*per_worker_args[0])]
+    def send(self, cmd: str, group: int, per_worker_args: list[tuple]) -> None:
+        """Run ``cmd`` on the group's slice now; :meth:`gather` returns its result."""
+        self._results[group] = [getattr(self.slices[group], cmd)(*per_worker_args[0])]
+
+    def gather(self, group: int) -> list:
+        """The result of the group's last :meth:`send` (one-element list)."""
+        return self._results.pop(group)
+
+    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
+        """The group's slice's result of ``cmd`` (one-element list)."""
+        self.send(cmd, group, per_worker_args)
+        return self.gather(group)
 
     def close(self) -> None:
         """Release the envs."""
-        if self.slice is not None:
-            self.slice.close()
-            self.slice = None
+        for sl in self.slices:
+            sl.close()
+        self.slices = []
 
 
-def _worker(conn, robot: str | RobotSpec, env_ids: list[int], seed: int, overrides: dict) -> None:
-    """Worker process loop: build a slice, then serve commands until 'close'. Ctrl-C is the
-    parent's to handle (it checkpoints and closes the workers): a worker ignores SIGINT."""
+def _worker(conn, robot: str | RobotSpec, groups: list[list[int]], seed: int, overrides: dict) -> None:
+    """Worker process loop: build one slice per group (``groups[g]``: its env ids), then serve
+    ``(cmd, group, args)`` commands in order until 'close'. Ctrl-C is the parent's to handle (it
+    checkpoints and closes the workers): a worker ignores SIGINT."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        sl = Slice(robot, env_ids, seed, overrides)
+        slices = [Slice(robot, ids, seed, overrides) for ids in groups]
         if "torch" in sys.modules:      # not loaded by the envs (2 s a worker); where it is, one thread
             sys.modules["torch"].set_num_threads(1)
         conn.send(("ok", None))
@@ -99,23 +113,27 @@ def _worker(conn, robot: str | RobotSpec, env_ids: list[int], seed: int, overrid
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
     while True:
-        cmd, payload = conn.recv()
+        cmd, group, payload = conn.recv()
         try:
             if cmd == "close":
-                sl.close()
+                for sl in slices:
+                    sl.close()
                 conn.send(("ok", None))
                 return
-            conn.send(("ok", getattr(sl, cmd)(*payload)))
+            conn.send(("ok", getattr(slices[group], cmd)(*payload)))
         except Exception as exc:
             conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
 
 
 class Processes:
-    """One slice per ``multiprocessing`` worker process (spawned: no inherited PyBullet state)."""
+    """``multiprocessing`` worker processes (spawned: no inherited PyBullet state), each holding
+    one slice per group."""
 
-    def __init__(self, robot: str | RobotSpec, ids: list[list[int]], seed: int, overrides: dict) -> None:
+    def __init__(self, robot: str | RobotSpec, groups: list[list[list[int]]], seed: int, overrides: dict) -> None:
         ctx = mp.get_context("spawn")
         self._procs, self._conns = [], []
+        self._pending: list[int] = []   # groups sent and not yet gathered, in order
+        ids = [[g[w] for g in groups] for w in range(len(groups[0]))]
         # a new process inherits an ignored SIGINT, so a Ctrl-C while it starts up is not its to report
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
@@ -144,20 +162,35 @@ class Processes:
             out.append(payload)
         return out
 
-    def call(self, cmd: str, per_worker_args: list[tuple]) -> list:
-        """Every worker's result of ``cmd``, in worker order."""
+    def send(self, cmd: str, group: int, per_worker_args: list[tuple]) -> None:
+        """Ask every worker to run ``cmd`` on its slice of ``group`` (returns at once)."""
         for conn, args in zip(self._conns, per_worker_args):
             try:
-                conn.send((cmd, args))
+                conn.send((cmd, group, args))
             except (BrokenPipeError, OSError):
                 pass   # reported by _gather with the worker's exit code
+        self._pending.append(group)
+
+    def gather(self, group: int) -> list:
+        """Every worker's result of the oldest :meth:`send` not yet gathered, which must be
+        ``group``'s, in worker order."""
+        if not self._pending or self._pending[0] != group:
+            raise RuntimeError(f"gather({group}) out of order: groups sent and not gathered: {self._pending}")
+        self._pending.pop(0)
         return self._gather()
+
+    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
+        """Every worker's result of ``cmd`` on its slice of ``group``, in worker order."""
+        self.send(cmd, group, per_worker_args)
+        return self.gather(group)
 
     def close(self) -> None:
         """Stop the workers (each closes its envs)."""
         for conn in self._conns:
             try:
-                conn.send(("close", ()))
+                for _ in self._pending:     # answers still owed: read them first
+                    conn.recv()
+                conn.send(("close", 0, ()))
                 conn.recv()
             except (OSError, EOFError, BrokenPipeError):
                 pass
@@ -165,4 +198,4 @@ class Processes:
             p.join(timeout=5)
             if p.is_alive():
                 p.terminate()
-        self._procs, self._conns = [], []
+        self._procs, self._conns, self._pending = [], [], []

@@ -1,6 +1,7 @@
 """A thin rsl-rl runner: the stock construction, our own iteration loop around the same PPO calls.
 
-Per iteration: rollout (``alg.act`` -> ``env.step`` -> ``alg.process_env_step``),
+Per iteration: rollout (``alg.act`` -> ``env.step`` -> ``alg.process_env_step``, pipelined over
+the env's groups: :mod:`virl_quad.training.rollout`),
 ``alg.compute_returns`` (where VirlPPO updates the distance model and recomputes
 rewards), ``alg.update``; then one progress line, TensorBoard scalars, a
 checkpoint every ``save_every`` iterations and a ground-truth evaluation every
@@ -20,11 +21,11 @@ from typing import Callable
 import numpy as np
 import torch
 from rsl_rl.runners import OnPolicyRunner
-from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
 from virl_quad.envs.workers import EnvWorkerLost
 from virl_quad.training import checkpoint
+from virl_quad.training.rollout import rollout
 
 #: below this spread of its encodings over the demonstration (units of e, in (0, 1)) the distance
 #: model's frame encoder counts as collapsed (trained healthy models: 0.04-0.1; collapsed ~1e-5)
@@ -160,20 +161,16 @@ class VirlRunner(OnPolicyRunner):
         self.save_checkpoint()
 
     def _rollout(self, obs: TensorDict) -> TensorDict:
-        with torch.inference_mode():
-            for _ in range(self.cfg["num_steps_per_env"]):
-                actions = self.alg.act(obs)
-                obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
-                if self.cfg.get("check_for_nan", True):
-                    check_nan(obs, rewards, dones)          # rsl-rl's check: ValueError naming the group
-                obs, rewards, dones = obs.to(self.device), rewards.to(self.device), dones.to(self.device)
-                self.alg.process_env_step(obs, rewards, dones, extras)
-                self._episode_len += 1
-                ended = dones.cpu().bool()
-                self._finished_lengths += self._episode_len[ended].tolist()
-                self._episode_len[ended] = 0
+        obs = rollout(self.alg, self.env, obs, self.cfg["num_steps_per_env"], self._count_episodes,
+                      check_nans=self.cfg.get("check_for_nan", True))
         self.env_steps += self.cfg["num_steps_per_env"] * self.env.num_envs
         return obs
+
+    def _count_episodes(self, dones: torch.Tensor) -> None:
+        self._episode_len += 1
+        ended = dones.cpu().bool()
+        self._finished_lengths += self._episode_len[ended].tolist()
+        self._episode_len[ended] = 0
 
     def _open_writer(self):
         """The run's TensorBoard writer (opened on first use)."""
