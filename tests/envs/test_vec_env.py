@@ -142,3 +142,30 @@ def test_an_env_worker_does_not_load_torch(tmp_path) -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_two_groups_step_the_same_envs_as_one() -> None:
+    torch.manual_seed(0)
+    actions = torch.randn(20, 5, 12)
+    runs = []
+    for pipeline in (False, True):
+        env = QuadrupedVecEnv("pupper", 5, num_workers=2, seed=4, episode_seconds=0.2, pipeline=pipeline)
+        assert len(env.groups) == (2 if pipeline else 1)
+        out = []
+        for a in actions:
+            obs, rew, dones, extras = env.step(a)
+            out.append(torch.cat([obs["policy"].flatten(), obs["agent_image"].flatten().float(), dones.float(),
+                                  extras["final_agent_image"].flatten().float(), rew]))
+        runs.append(torch.stack(out))
+        if pipeline:   # a group stepped on its own: only its envs move, in its own env order
+            lo, hi = env.groups[1]
+            before = env.get_observations()["policy"].clone()
+            env.step_async(torch.zeros(hi - lo, 12), 1)
+            obs, _, dones, _ = env.step_wait(1)
+            assert obs.batch_size == torch.Size([hi - lo]) and dones.shape == (hi - lo,)
+            after = env.get_observations()["policy"]
+            assert torch.equal(after[:lo], before[:lo]) and not torch.equal(after[lo:], before[lo:])
+            with pytest.raises(RuntimeError, match="out of order"):
+                env._workers.gather(0)
+        env.close()
+    assert torch.equal(runs[0], runs[1])
