@@ -148,16 +148,16 @@ def test_two_groups_step_the_same_envs_as_one() -> None:
     torch.manual_seed(0)
     actions = torch.randn(20, 5, 12)
     runs = []
-    for pipeline in (False, True):
-        env = QuadrupedVecEnv("pupper", 5, num_workers=2, seed=4, episode_seconds=0.2, pipeline=pipeline)
-        assert len(env.groups) == (2 if pipeline else 1)
+    for workers in (0, 2):     # in this process: one group; two worker processes: two groups
+        env = QuadrupedVecEnv("pupper", 5, num_workers=workers, seed=4, episode_seconds=0.2)
+        assert len(env.groups) == (2 if workers else 1)
         out = []
         for a in actions:
             obs, rew, dones, extras = env.step(a)
             out.append(torch.cat([obs["policy"].flatten(), obs["agent_image"].flatten().float(), dones.float(),
                                   extras["final_agent_image"].flatten().float(), rew]))
         runs.append(torch.stack(out))
-        if pipeline:   # a group stepped on its own: only its envs move, in its own env order
+        if workers:   # a group stepped on its own: only its envs move, in its own env order
             lo, hi = env.groups[1]
             before = env.get_observations()["policy"].clone()
             env.step_async(torch.zeros(hi - lo, 12), 1)

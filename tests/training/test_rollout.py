@@ -57,10 +57,11 @@ def _ppo(env) -> VirlPPO:
     return alg
 
 
-def test_a_pipelined_rollout_stores_each_transition_whole_and_in_env_order() -> None:
-    env = QuadrupedVecEnv("pupper", 4, num_workers=2, seed=3, episode_seconds=0.1, render=False)
+@pytest.mark.parametrize("workers, groups", [(2, 2), (0, 1)])   # worker processes; this process
+def test_a_rollout_stores_each_transition_whole_and_in_env_order(workers: int, groups: int) -> None:
+    env = QuadrupedVecEnv("pupper", 4, num_workers=workers, seed=3, episode_seconds=0.1, render=False)
     try:
-        assert len(env.groups) == 2                      # worker processes: two groups of two envs
+        assert len(env.groups) == groups
         env.episode_length_buf[:] = torch.tensor([0, 1, 2, 3])   # envs time out at different steps
         rec = Recording(env)
         alg = _ppo(rec)
@@ -90,14 +91,3 @@ def test_a_pipelined_rollout_stores_each_transition_whole_and_in_env_order() -> 
     finally:
         env.close()
 
-
-@pytest.mark.parametrize("workers", [0, 2])
-def test_one_group_steps_in_step(workers: int) -> None:
-    env = QuadrupedVecEnv("pupper", 2, num_workers=workers, seed=0, episode_seconds=1.0, render=False)
-    try:
-        assert len(env.groups) == 1                      # in-process, or too few envs for two groups
-        alg = _ppo(env)
-        rollout(alg, env, env.get_observations(), 3, lambda dones: None)
-        assert alg.storage.step == 3
-    finally:
-        env.close()

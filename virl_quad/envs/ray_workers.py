@@ -136,11 +136,6 @@ class RayActors:
         refs, self._refs = self._refs, None
         return self._get(refs)
 
-    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
-        """Every actor's result of ``cmd``, in worker order (the actors run at once)."""
-        self.send(cmd, group, per_worker_args)
-        return self.gather(group)
-
     def close(self) -> None:
         """Release the envs and end the actors (the cluster stays up)."""
         if not self.actors:

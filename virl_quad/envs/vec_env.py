@@ -8,7 +8,7 @@ keeps everything in this process: debugging, tests) or Ray actors on a cluster
 (``"ray"``, see :mod:`virl_quad.envs.ray_workers`); a lost worker raises
 :class:`EnvWorkerLost`.
 
-With worker processes the envs are split in two *groups* (``pipeline``), each spread over
+With worker processes the envs are split in two *groups*, each spread over
 every worker: :meth:`QuadrupedVecEnv.step_async` / :meth:`~QuadrupedVecEnv.step_wait` step one
 group while the caller acts on the other's observations, so the workers do not wait for the
 policy (the runner's rollout does this; :meth:`~QuadrupedVecEnv.step` steps both, the same envs
@@ -54,8 +54,7 @@ class QuadrupedVecEnv(VecEnv):
 
     def __init__(self, robot: str | RobotSpec, num_envs: int, *, num_workers: int | None = None, seed: int = 0,
                  device: str = "cpu", episode_seconds: float | None = None, workers_kind: str = "local",
-                 ray_address: str | None = None, actor_prefix: str = "", pipeline: bool = True,
-                 **overrides: Any) -> None:
+                 ray_address: str | None = None, actor_prefix: str = "", **overrides: Any) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         robot = robots.get(robot)
@@ -77,7 +76,7 @@ class QuadrupedVecEnv(VecEnv):
         if workers_kind not in WORKER_KINDS:
             raise ValueError(f"unknown workers {workers_kind!r}; choose one of: {', '.join(WORKER_KINDS)}")
         # two groups where worker processes can step one while the policy acts on the other
-        n_groups = 2 if pipeline and workers_kind == "local" and workers > 0 and num_envs >= 2 * workers else 1
+        n_groups = 2 if workers_kind == "local" and workers > 0 and num_envs >= 2 * workers else 1
         slices = 1 if workers_kind == "local" and workers == 0 else max(workers, 1)
         group_ids = np.array_split(np.arange(num_envs), n_groups)
         #: env range (first, end) of each group, in env order

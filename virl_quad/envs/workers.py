@@ -2,10 +2,10 @@
 
 A *slice* is a group of envs stepped together (:class:`Slice`). The envs fall into *groups*
 that step independently (``groups[g][w]``: the ids of group ``g``'s envs on worker ``w``); a
-worker holds one slice per group. A backend answers ``call(cmd, group, per_worker_args)`` with
-the list of that group's slices' results, in worker order; ``send`` and ``gather`` split a call
-in two, so that one group steps while the caller works on the other's results (a worker runs
-its commands in the order sent):
+worker holds one slice per group. A backend's ``send(cmd, group, per_worker_args)`` starts a
+command on that group's slices and ``gather(group)`` returns their results in worker order, so
+that one group steps while the caller works on the other's results (a worker runs its commands
+in the order sent):
 
 - :class:`InProcess`: the slices in this process (debugging, tests; ``send`` runs at once);
 - :class:`Processes`: each ``multiprocessing`` worker holds one slice per group (the default:
@@ -86,11 +86,6 @@ class InProcess:
     def gather(self, group: int) -> list:
         """The result of the group's last :meth:`send` (one-element list)."""
         return self._results.pop(group)
-
-    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
-        """The group's slice's result of ``cmd`` (one-element list)."""
-        self.send(cmd, group, per_worker_args)
-        return self.gather(group)
 
     def close(self) -> None:
         """Release the envs."""
@@ -178,11 +173,6 @@ class Processes:
             raise RuntimeError(f"gather({group}) out of order: groups sent and not gathered: {self._pending}")
         self._pending.pop(0)
         return self._gather()
-
-    def call(self, cmd: str, group: int, per_worker_args: list[tuple]) -> list:
-        """Every worker's result of ``cmd`` on its slice of ``group``, in worker order."""
-        self.send(cmd, group, per_worker_args)
-        return self.gather(group)
 
     def close(self) -> None:
         """Stop the workers (each closes its envs)."""
