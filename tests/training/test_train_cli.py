@@ -148,10 +148,10 @@ def test_resume_keeps_the_anchor_and_takes_a_typed_pull(tmp_path: Path) -> None:
             "--run-dir", str(run_dir), *TINY)
     assert p.returncode == 0, p.stderr[-2000:]
     saved = checkpoint.load(run_dir)["anchor"]
-    assert saved["pull"] == pytest.approx(0.02) and saved["weights"]
+    assert saved["pull"] == pytest.approx(0.01) and saved["weights"]
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "2", "--prior-pull", "0.1")
     assert p.returncode == 0, p.stderr[-2000:]
-    assert "pull 0.1 per PPO update (the checkpoint's: 0.02)" in p.stdout
+    assert "pull 0.1 per PPO update (the checkpoint's: 0.01)" in p.stdout
     anchor = checkpoint.load(run_dir)["anchor"]
     assert anchor["pull"] == pytest.approx(0.1)
     assert all(torch.equal(a, b) for a, b in zip(anchor["weights"], saved["weights"]))

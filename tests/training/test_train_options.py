@@ -118,8 +118,8 @@ def test_options_are_sections_by_concern_saved_flat_and_read_back() -> None:
 def test_the_anchor_pull_by_default_guards_every_reward_but_the_exact_one():
     from virl_quad.training.config import prior_pull
 
-    assert prior_pull(TrainArgs()) == 0.02
-    assert prior_pull(TrainArgs.make(reward="prior")) == 0.02
+    assert prior_pull(TrainArgs()) == 0.01
+    assert prior_pull(TrainArgs.make(reward="prior")) == 0.01
     assert prior_pull(TrainArgs.make(reward="oracle")) == 0.0
     assert prior_pull(TrainArgs.make(reward="oracle", prior_pull=0.05)) == 0.05
     assert prior_pull(TrainArgs.make(prior_pull=0.0)) == 0.0

@@ -131,8 +131,8 @@ class PPOOptions:
     hidden: str = opt("256,128", "actor/critic MLP hidden sizes, comma separated")
     prior_pull: float = opt(-1.0,
         "with a warm start: after every PPO update the actor's weights move this fraction of the way "
-        "back to the warm start's (weight decay towards the prior, half-life ~35 iterations at 0.02; 0: "
-        "none): drift on a noisy learned reward fades, a push the reward keeps up holds. -1: 0.02, "
+        "back to the warm start's (weight decay towards the prior, half-life ~70 iterations at 0.01; 0: "
+        "none): drift on a noisy learned reward fades, a push the reward keeps up holds. -1: 0.01, "
         "but 0 with --reward oracle (an exact reward needs no guard, and the anchor slows its gains). "
         "With --resume: the saved warm start stays the anchor, typed here the pull changes")
     critic_warmup: int = opt(10,
@@ -166,10 +166,10 @@ class TrainArgs(Sectioned):
 
 
 def prior_pull(args: TrainArgs) -> float:
-    """The anchor's pull per PPO update (``--prior-pull``; -1: 0.02, 0 with the oracle reward)."""
+    """The anchor's pull per PPO update (``--prior-pull``; -1: 0.01, 0 with the oracle reward)."""
     if args.ppo.prior_pull >= 0:
         return float(args.ppo.prior_pull)
-    return 0.0 if args.run.reward == "oracle" else 0.02
+    return 0.0 if args.run.reward == "oracle" else 0.01
 
 
 def validate(args: TrainArgs) -> None:
