@@ -51,7 +51,10 @@ def test_bad_input_is_one_error_line_and_exit_2(module: str, args: list[str], me
 
 @pytest.mark.parametrize("module, args", [("virl_quad.train", ["--init-std", "5"]),
                                           ("virl_quad.compare", ["--confusion", "trot,trot"]),
-                                          ("virl_quad.evaluate", ["--policy", "p.pt", "--episodes", "0"])])
+                                          ("virl_quad.evaluate", ["--policy", "p.pt", "--episodes", "0"]),
+                                          ("virl_quad.export", ["no/such/run", "--out", "x.pt"]),
+                                          ("virl_quad.export", ["run", "--out", "x.onnx"]),
+                                          ("virl_quad.deploy.serve", ["--policy", "missing.pt"])])
 def test_bad_options_are_refused_before_torch_and_the_simulator_load(module: str, args: list[str],
                                                                     tmp_path: Path) -> None:
     """A mistyped option is answered at once: nothing heavy is imported on the way to the error."""

@@ -11,21 +11,23 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-
-import torch
-from rsl_rl.models import MLPModel
-from tensordict import TensorDict
+from typing import TYPE_CHECKING
 
 from virl_quad import robots
 from virl_quad.cli import UserError, opt, parse, run_main
 from virl_quad.policy.contract import PolicyContract
-from virl_quad.policy_io import metadata_for, save_policy
-from virl_quad.training import checkpoint
 from virl_quad.training.config import TrainArgs, from_dict, hidden_sizes, rsl_rl_config
+
+if TYPE_CHECKING:                                  # torch loads only once the options are good
+    from rsl_rl.models import MLPModel
 
 
 def _actor(contract: PolicyContract, args: TrainArgs) -> MLPModel:
     """An rsl-rl actor of the training architecture for ``contract``'s observation and action sizes."""
+    import torch
+    from rsl_rl.models import MLPModel
+    from tensordict import TensorDict
+
     obs = TensorDict({"policy": torch.zeros(1, contract.observation_size)}, batch_size=[1])
     cfg = rsl_rl_config(args)["actor"]
     cfg.pop("class_name")
@@ -34,6 +36,8 @@ def _actor(contract: PolicyContract, args: TrainArgs) -> MLPModel:
 
 def actor_from_checkpoint(data: dict) -> tuple[MLPModel, TrainArgs, PolicyContract]:
     """Rebuild the rsl-rl actor of a checkpoint (eval mode), with the run's options and policy contract."""
+    from virl_quad.training import checkpoint
+
     args = from_dict(data["config"])
     contract = checkpoint.contract_of(data, args.run.robot)
     hidden_sizes(args)
@@ -55,6 +59,8 @@ def default_contract(robot: str, demo_frames: int | None = None, tg=None) -> Pol
 
 def fresh_actor(contract: PolicyContract, hidden: list[int] | tuple[int, ...] = (256, 128), seed: int = 0) -> MLPModel:
     """An untrained actor with the training architecture for ``contract`` (for tests and dry runs)."""
+    import torch
+
     torch.manual_seed(seed)
     return _actor(contract, TrainArgs.make(hidden=",".join(str(h) for h in hidden))).eval()
 
@@ -63,9 +69,11 @@ def export_actor(actor: MLPModel, robot: str, out: str | Path, contract: PolicyC
                  scores: dict | None = None, extra: dict | None = None, onnx: bool = False) -> Path:
     """Script ``actor`` and write ``out`` (.pt) with its metadata (``contract``: how the actor was
     trained to act and what it observes; ONNX on request)."""
-    out = Path(out)
-    if out.suffix != ".pt":
-        raise UserError(f"--out must end in .pt, got {out}")
+    import torch
+
+    from virl_quad.policy_io import metadata_for, save_policy
+
+    out = _checked_out(out)
     spec = robots.get(robot)
     scripted = torch.jit.script(actor.as_jit())
     meta = metadata_for(spec, contract, demo=demo, scores=scores)
@@ -76,9 +84,21 @@ def export_actor(actor: MLPModel, robot: str, out: str | Path, contract: PolicyC
     return out
 
 
+def _checked_out(out: str | Path) -> Path:
+    """``out`` as a Path; UserError unless it ends in .pt."""
+    out = Path(out)
+    if out.suffix != ".pt":
+        raise UserError(f"--out must end in .pt, got {out}")
+    return out
+
+
 def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
     """Export the run in ``run_dir`` to ``out`` (``.pt``); returns the path written."""
-    run_dir = Path(run_dir)
+    run_dir, out = Path(run_dir), _checked_out(out)
+    if not run_dir.exists():
+        raise UserError(f"run folder {run_dir} does not exist")
+    from virl_quad.training import checkpoint
+
     data = checkpoint.load(run_dir)
     actor, args, contract = actor_from_checkpoint(data)
     report = run_dir / "report.json"
@@ -96,6 +116,8 @@ def export(run_dir: str | Path, out: str | Path, onnx: bool = False) -> Path:
 
 
 def _export_onnx(actor: MLPModel, path: Path) -> None:
+    import torch
+
     model = actor.as_onnx(verbose=False).eval()
     try:
         torch.onnx.export(model, model.get_dummy_inputs(), str(path), input_names=model.input_names,

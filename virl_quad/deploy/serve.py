@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 import zenoh
 
 from virl_quad.cli import UserError, opt, parse, run_main
@@ -286,10 +285,9 @@ class Server:
 
 def load(path: str) -> Any:
     """Load and check a policy; UserError or ValueError (one line) for a missing or bad file."""
-    from virl_quad.policy_io import load_policy
-
     if not Path(path).is_file():
         raise UserError(f"policy file {path} does not exist (train and export one, or pass --policy)")
+    from virl_quad.policy_io import load_policy                # torch: only for a file that exists
     try:
         policy = load_policy(path)
     except (KeyError, TypeError, AttributeError) as e:   # metadata with missing or mistyped members
@@ -305,6 +303,8 @@ def speed_up(policy: Any, warmup: int = 20) -> Any:
     :func:`virl_quad.policy_io.load_policy` (17 µs here): only other structures go through torch."""
     if policy.fast is not None:   # served in numpy: the module is only its reference
         return policy
+    import torch
+
     probe = np.random.default_rng(0).normal(size=policy.meta["observation"]["size"]).astype(np.float32)
     want = policy.act(probe)
     original = policy.module
@@ -322,9 +322,11 @@ def speed_up(policy: Any, warmup: int = 20) -> Any:
 def main(config: ServeConfig) -> int:
     """Serve ``config.policy`` until SIGINT/SIGTERM; returns the exit code (bad input: UserError,
     ValueError or FileNotFoundError, printed as one line with exit code 2 by run_main)."""
-    torch.set_num_threads(max(1, config.threads))
     path = config.policy or str(default_policy())
-    policy = load(path)
+    policy = load(path)                                 # a missing file is refused before torch loads
+    import torch
+
+    torch.set_num_threads(max(1, config.threads))
     robot_id = P.check_robot_id(config.robot_id or f"{policy.meta['robot']}-01")
     conf = open_config(config.zenoh, listen=config.listen or [], connect=config.connect)
     if not config.connect and conf.get_json("connect/endpoints").strip() in ("[]", "null"):
