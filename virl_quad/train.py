@@ -153,14 +153,16 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
     carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`), with
     hind feet and swing changed where that teacher travels against the video's ground; writes
     prior_fit.json and prior_fit.png (video | fitted gait) into the run folder."""
+    from virl_quad import robots
     from virl_quad.training.prior_check import gait_for_travel, pick_carrying
     from virl_quad.training.video_prior import describe, fit_tg_to_video, save_fit_sheet, silhouettes
 
     print("fitting the gait prior to the demonstration video ...", flush=True)
     say = lambda line: print(line, flush=True)
     local = args.env.workers == "local" and args.env.num_workers > 0          # the user's process count
+    bodies = [robots.get(name) for name in robots.names()]                     # which one the video shows
     finalists, report, fitted = fit_tg_to_video(demo.frames, demo.fps, spec, log=say,
-                                                workers=args.env.num_workers if local else None)
+                                                workers=args.env.num_workers if local else None, bodies=bodies)
     k = 0
     if args.prior.warm_start_rounds > 0:
         k, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,

@@ -13,10 +13,11 @@ from virl_quad import demo as demo_lib
 from virl_quad import robots
 from virl_quad.motion.gaits import PHASE_OFFSETS
 from virl_quad.policy.tg import TGParams
-from virl_quad.training.video_prior import (fit_tg_to_video, gait_period, relative_offsets, same_pattern,
-                                            silhouettes)
+from virl_quad.training.video_prior import (dark_level, fit_tg_to_video, gait_period, leg_length, relative_offsets,
+                                            same_pattern, silhouettes, template, transfer, video_body)
 
 PUPPER = robots.get("pupper")
+LAIKAGO = robots.get("laikago")
 
 
 @pytest.mark.parametrize("gait, frames", [("trot", 25), ("bound", 20), ("walk", 40)])
@@ -32,6 +33,58 @@ def test_silhouettes_paint_sky_and_ground_and_keep_the_robot() -> None:
     assert (out[:, -2:] == 255).all() and (out[:, :2] == 255).all()
     robot = ~np.isin(video, [89, 140, 255])                  # checker squares and sky
     assert robot.any() and (out[robot] == video[robot]).all()
+
+
+def test_silhouettes_on_a_textured_ground_keep_what_is_darker_than_it() -> None:
+    rng = np.random.default_rng(0)
+    video = np.full((20, 48, 48), 250, np.uint8)                              # sky
+    video[:, 24:] = rng.integers(90, 141, (20, 24, 48))                       # ground of many levels
+    for t in range(20):
+        video[t, 20:30, 10 + t:20 + t] = 40                                   # a dark robot walking by
+    assert dark_level(video) == 90 - 6 or dark_level(video) == 91 - 6
+    out = silhouettes(video)
+    assert set(np.unique(out)) == {0, 255} and (out[video == 40] == 0).all() and (out[video != 40] == 255).all()
+    flat = np.where(out == 255, 250, 40).astype(np.uint8)                     # a render on a flat ground
+    assert dark_level(flat) is None
+    assert np.array_equal(silhouettes(flat, video), out)                      # drawn by the video's rule
+    noise = rng.integers(0, 256, (20, 48, 48), dtype=np.uint8)                # nothing darker than the "ground"
+    assert dark_level(noise) is None and np.array_equal(silhouettes(noise), noise)
+
+
+def test_a_gait_fitted_on_another_body_is_carried_over_by_leg_length() -> None:
+    from virl_quad.policy.tg import TrajectoryGenerator
+
+    fitted = replace_tg(template(LAIKAGO), frequency=1.85, offsets=(0.0, 0.5, 0.5, 0.0), duty=0.4)
+    out = transfer(fitted, LAIKAGO, PUPPER)
+    k = leg_length(PUPPER) / leg_length(LAIKAGO)
+    assert 0.2 < k < 0.6
+    assert (out.frequency, out.offsets, out.duty) == (fitted.frequency, fitted.offsets, fitted.duty)
+    assert out.step_length == pytest.approx(fitted.step_length * k) and out.swing_height == pytest.approx(
+        fitted.swing_height * k)
+    assert out.stance_height == template(PUPPER).stance_height
+    TrajectoryGenerator(PUPPER, out)                                          # within Pupper's reach
+    assert transfer(fitted, LAIKAGO, LAIKAGO) is fitted
+
+
+def replace_tg(params: TGParams, **changes) -> TGParams:
+    """``params`` with some fields changed."""
+    from dataclasses import replace
+
+    return replace(params, **changes)
+
+
+def test_the_body_a_video_shows_is_found() -> None:
+    from virl_quad.training.synthesis import Synthesizer
+
+    synth = Synthesizer(LAIKAGO, PUPPER.control_hz)                            # a Laikago seen at Pupper's rate
+    try:
+        laikago_video = synth.render(replace_tg(template(LAIKAGO), frequency=2.0), 60)
+    finally:
+        synth.close()
+    body, costs = video_body(laikago_video, PUPPER.control_hz, [PUPPER, LAIKAGO])
+    assert body is LAIKAGO and costs["laikago"] < 0.5 * costs["pupper"]
+    body, costs = video_body(demo_lib.load("trot", "pupper").frames[:60], PUPPER.control_hz, [PUPPER, LAIKAGO])
+    assert body is PUPPER and costs["pupper"] < 0.5 * costs["laikago"]
 
 
 @pytest.mark.parametrize("gait", ["trot", "pace"])

@@ -20,24 +20,26 @@ from virl_quad.robots.spec import RobotSpec
 
 
 class Synthesizer:
-    """Kinematic renders of a TG on one robot with the env's camera and ground (no physics)."""
+    """Kinematic renders of a TG on one robot with the env's camera and ground (no physics), at
+    ``fps`` frames per second (None: the robot's control rate)."""
 
-    def __init__(self, spec: RobotSpec) -> None:
+    def __init__(self, spec: RobotSpec, fps: float | None = None) -> None:
         from virl_quad.sim.camera import CameraParams
         from virl_quad.sim.world import World
 
         self.spec = spec
+        self.fps = float(fps or spec.control_hz)                              # Hz
         self.cam = CameraParams.from_spec(spec)
         self.world = World(spec, ground="plain")        # painted out by silhouettes() anyway
 
     def render(self, params: TGParams, num_frames: int) -> np.ndarray | None:
-        """Gray frames (num_frames, 48, 48) uint8 of the TG played from phase 0 at the control
-        rate, or None when its feet are out of the robot's reach."""
+        """Gray frames (num_frames, 48, 48) uint8 of the TG played from phase 0 at the
+        synthesizer's frame rate, or None when its feet are out of the robot's reach."""
         try:
             tg = TrajectoryGenerator(self.spec, params)
         except ValueError:
             return None
-        t = np.arange(num_frames) / self.spec.control_hz                      # s
+        t = np.arange(num_frames) / self.fps                                  # s
         q = self.spec.clip_to_limits(tg.joint_targets((t * params.frequency)[:, None]))
         speed = params.step_length * params.frequency / params.duty           # m/s, stance feet at rest
         base_z = self.spec.foot_radius - float(np.mean(tg.stance_z))          # m, stance feet on the ground
@@ -55,9 +57,9 @@ class Synthesizer:
 _WORKER: Synthesizer | None = None          # a pool process's own synthesizer
 
 
-def _start_worker(spec: RobotSpec) -> None:
+def _start_worker(spec: RobotSpec, fps: float | None) -> None:
     global _WORKER
-    _WORKER = Synthesizer(spec)
+    _WORKER = Synthesizer(spec, fps)
 
 
 def _render_in_worker(job: tuple[TGParams, int]) -> np.ndarray | None:
@@ -74,13 +76,14 @@ def default_workers() -> int:
 
 
 class RenderPool:
-    """Renders of many candidate TGs on ``workers`` spawned processes (1: in this process)."""
+    """Renders of many candidate TGs on ``workers`` spawned processes (1: in this process), at
+    ``fps`` frames per second (None: the robot's control rate)."""
 
-    def __init__(self, spec: RobotSpec, workers: int | None = None) -> None:
+    def __init__(self, spec: RobotSpec, workers: int | None = None, fps: float | None = None) -> None:
         self.workers = max(1, default_workers() if workers is None else int(workers))
-        self._local = Synthesizer(spec) if self.workers == 1 else None
+        self._local = Synthesizer(spec, fps) if self.workers == 1 else None
         self._pool = None if self.workers == 1 else ProcessPoolExecutor(
-            self.workers, mp_context=mp.get_context("spawn"), initializer=_start_worker, initargs=(spec,))
+            self.workers, mp_context=mp.get_context("spawn"), initializer=_start_worker, initargs=(spec, fps))
 
     def render_many(self, candidates: list[TGParams], num_frames: int) -> list[np.ndarray | None]:
         """:meth:`Synthesizer.render` of each candidate, in order."""

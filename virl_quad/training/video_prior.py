@@ -6,7 +6,10 @@ like the demonstration video, found without the demonstration's reference motion
 0. **Silhouettes** (:func:`silhouettes`): the flat background (the gray levels that fill the
    top and bottom rows: sky and ground) is painted white. The follow camera sees the ground
    scroll by at the robot's speed, a second period (a checker square per 0.5 s at 0.25 m/s)
-   that has nothing to do with the legs; a TG cannot say where along the ground it is.
+   that has nothing to do with the legs; a TG cannot say where along the ground it is. A
+   ground with no flat levels (a checker rendered large and shrunk to 48 px blurs into many
+   levels) keeps only the pixels darker than the ground's darkest level, in the video and the
+   candidates alike.
 1. **Period** (:func:`gait_period`): the lag, within the gait band, at which the video's
    silhouettes are most alike (self-similarity). Half a trot or pace cycle looks almost
    like a whole one from the side (near and far legs swap), so the search tries the
@@ -22,6 +25,14 @@ like the demonstration video, found without the demonstration's reference motion
 3. **Search**: every phase pattern on a grid of quarter cycles at both periods, then the
    duty factor of the best patterns, then speed and swing height, then each leg's offset
    in eighths.
+
+**The video's body** (:func:`video_body`): a video of another robot (a Laikago's trot for a
+Pupper to learn) is further from every candidate drawn on the learner's body than two gaits
+drawn on one body are from each other: bodies differ in size, colour and leg shape. So the
+candidates are drawn on the body of the registered robots whose built-in trot, rendered by its
+own camera, looks most like the video, and the fitted gait is carried over to the learner
+(:func:`transfer`): the same frequency, phase pattern and duty factor, step length and swing
+height scaled by the ratio of leg lengths (as the motion retargeting scales a clip).
 
 :func:`fit_tg_to_video` returns the nearest candidates (the finalists, as
 :class:`~virl_quad.policy.tg.TGParams`: the fit first, the others for
@@ -49,6 +60,8 @@ from virl_quad.training.synthesis import RenderPool
 GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
 MIN_PERIODICITY = 0.3       # below this the video shows no periodic motion (1: exactly periodic)
 MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) below which a video is still
+FLAT_SHARE = 0.8            # share of a video's bottom rows its flat gray levels must fill: else its ground
+                            # is textured and silhouettes keep the pixels darker than the ground
 
 
 @dataclass(frozen=True)
@@ -64,13 +77,34 @@ class VideoFitConfig:
                                                          # (virl_quad.training.prior_check) tries them in turn
 
 
-def silhouettes(frames: np.ndarray) -> np.ndarray:
-    """Frames (T, H, W) uint8 with their own flat background painted white
-    (:func:`virl_quad.reward.frames.background_levels`): the same for a video and a render on
-    another ground. A textured background stays."""
+def dark_level(video: np.ndarray) -> int | None:
+    """For a video (T, H, W) uint8 on a textured ground (painting its flat levels clears less than
+    :data:`FLAT_SHARE` of its bottom rows: a checker seen in perspective and shrunk, whose squares
+    blur into many levels), the gray level below which a pixel is the subject: the ground's darkest
+    (1st percentile of the bottom rows) less the painting's tolerance. None for a flat background,
+    or a textured one with nothing darker than it (the frames are then used as they are)."""
+    from virl_quad.reward.frames import BORDER_ROWS, TOLERANCE, background_levels, level_table
+
+    video = np.asarray(video, dtype=np.uint8)
+    ground = video[:, -BORDER_ROWS:]
+    if level_table(background_levels(video))[ground].mean() >= FLAT_SHARE:
+        return None
+    level = int(np.percentile(ground, 1)) - TOLERANCE
+    return level if level > 0 else None
+
+
+def silhouettes(frames: np.ndarray, video: np.ndarray | None = None) -> np.ndarray:
+    """Frames (T, H, W) uint8 as silhouettes, by the rule ``video``'s background calls for (None:
+    the frames' own): on a flat background, its gray levels painted white
+    (:func:`virl_quad.reward.frames.background_levels`; the same for a video and a render on
+    another ground); on a textured one (:func:`dark_level`), black where a pixel is darker than
+    the ground's darkest level and white elsewhere (a robot darker than its ground)."""
     from virl_quad.reward.frames import background_levels, paint
 
-    return paint(frames, background_levels(frames))
+    level = dark_level(frames if video is None else video)
+    if level is None:
+        return paint(frames, background_levels(frames))
+    return np.where(np.asarray(frames) < level, 0, 255).astype(np.uint8)
 
 
 def gait_period(frames: np.ndarray, fps: float) -> tuple[float, float]:
@@ -128,6 +162,39 @@ def relative_offsets(offsets) -> tuple[float, ...]:
     return tuple(float(v) for v in np.mod(o - o[0], 1.0))
 
 
+def leg_length(spec: RobotSpec) -> float:
+    """m: the robot's mean leg length, hip joint -> knee -> foot."""
+    return float(np.mean(spec.leg.upper_leg_length + spec.leg.lower_leg_length))
+
+
+def transfer(params: TGParams, body: RobotSpec, spec: RobotSpec) -> TGParams:
+    """A TG fitted on ``body`` carried over to ``spec``: frequency (Hz), phase pattern and duty
+    kept, step length and swing height (m) scaled by the leg-length ratio, stance height and
+    neutral feet of ``spec``'s built-in trot. ``params`` itself when the two are one robot."""
+    if body.name == spec.name:
+        return params
+    k = leg_length(spec) / leg_length(body)
+    return replace(template(spec), frequency=params.frequency, offsets=params.offsets, duty=params.duty,
+                   step_length=params.step_length * k, swing_height=params.swing_height * k)
+
+
+def video_body(video: np.ndarray, fps: float, bodies: list[RobotSpec]) -> tuple[RobotSpec, dict[str, float]]:
+    """The body among ``bodies`` whose built-in trot, rendered kinematically by its own camera at
+    ``fps`` (Hz), is nearest a video (T, 48, 48) uint8, both as silhouettes by the video's rule;
+    returns it and each body's distance (gray levels / 255, at the best time shift over one trot
+    cycle)."""
+    target = torch.from_numpy(silhouettes(video)).float() / 255.0
+    costs: dict[str, float] = {}
+    for body in bodies:
+        base = template(body)
+        shifts = int(math.ceil(fps / base.frequency))
+        with RenderPool(body, 1, fps) as pool:
+            raw = pool.render_many([base], len(target) + shifts)[0]
+        f = torch.from_numpy(silhouettes(raw, video)).float() / 255.0
+        costs[body.name] = float(min((target - f[s:s + len(target)]).abs().mean() for s in range(shifts)))
+    return min(bodies, key=lambda b: costs[b.name]), costs
+
+
 def same_pattern(a, b, tolerance: float = 0.125) -> bool:
     """Whether two leg-offset sets are the same phase pattern (each leg within ``tolerance`` cycles
     relative to leg FR)."""
@@ -136,12 +203,13 @@ def same_pattern(a, b, tolerance: float = 0.125) -> bool:
 
 
 class _Scorer:
-    """Distance of candidate renders to the video's silhouettes: the mean absolute difference
-    (gray levels / 255) at the best time shift."""
+    """Distance of candidate renders to a video (T, 48, 48) uint8, both as silhouettes by the
+    video's rule: the mean absolute difference (gray levels / 255) at the best time shift."""
 
     def __init__(self, video: np.ndarray, renders: RenderPool, shifts: int) -> None:
-        self.video, self.renders, self.shifts = video, renders, shifts
-        self.video_f = torch.from_numpy(video).float() / 255.0
+        self.raw_video, self.renders, self.shifts = video, renders, shifts
+        self.video = silhouettes(video)
+        self.video_f = torch.from_numpy(self.video).float() / 255.0
         self.cache: dict[TGParams, tuple[float, int, np.ndarray | None]] = {}
 
     def prefetch(self, candidates: list[TGParams]) -> None:
@@ -152,7 +220,7 @@ class _Scorer:
             if raw is None:
                 self.cache[params] = (math.inf, 0, None)
                 continue
-            frames = silhouettes(raw)
+            frames = silhouettes(raw, self.raw_video)
             f = torch.from_numpy(frames).float() / 255.0
             costs = torch.stack([(self.video_f - f[s:s + n]).abs().mean() for s in range(self.shifts)])
             s = int(torch.argmin(costs))
@@ -197,23 +265,28 @@ def _search(scorer: _Scorer, base: TGParams, periods: list[float], fps: float, c
 
 
 def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoFitConfig = VideoFitConfig(),
-                    log: Callable[[str], None] | None = None,
-                    workers: int | None = None) -> tuple[TGParams, dict, np.ndarray]:
-    """Fit TG parameters to a demonstration video (T, 48, 48) uint8 at ``fps`` (Hz), the robot's
-    control rate, seen by the env's camera. The candidates are rendered on ``workers`` processes
-    (None: one per CPU core; the fit is the same for any number).
+                    log: Callable[[str], None] | None = None, workers: int | None = None,
+                    bodies: list[RobotSpec] | None = None) -> tuple[TGParams, dict, np.ndarray]:
+    """Fit TG parameters for robot ``spec`` to a demonstration video (T, 48, 48) uint8 at ``fps``
+    (Hz), the robot's control rate. The candidates are drawn on the body among ``bodies`` that
+    the video shows (:func:`video_body`; None: ``spec``'s own) and carried over to ``spec``
+    (:func:`transfer`); they are rendered on ``workers`` processes (None: one per CPU core; the
+    fit is the same for any number).
 
     Returns ``(finalists, report, fitted)``: the best candidates' parameters, nearest first (the
     fit: ``finalists[0]``), the report, and each finalist's silhouettes (F, T, 48, 48) aligned with
-    the video's. The report holds ``period_frames``, ``periodicity``, ``distance`` (of the nearest,
-    gray levels / 255), ``candidates`` (renders made), ``seconds`` and ``finalists`` (each one's
-    figures and its parameters as ``tg``: :meth:`TGParams.to_dict`). ValueError
+    the video's. The report holds ``period_frames``, ``periodicity``, ``body`` (the robot the
+    candidates were drawn on) and ``body_distances`` (each body's, with ``bodies``), ``distance``
+    (of the nearest, gray levels / 255), ``candidates`` (renders made), ``seconds`` and
+    ``finalists`` (each one's figures for ``spec`` and its parameters as ``tg``:
+    :meth:`TGParams.to_dict`). ValueError
     (one line) for a still video, one with no periodic motion, or one too short for two cycles."""
     t0 = time.time()
     raw = np.asarray(frames, dtype=np.float32) / 255.0
     if len(raw) > 1 and float(np.mean((raw[1:] - raw[:-1]) ** 2)) < MIN_MOTION:   # before painting, which
         raise ValueError("the video is a still image: no motion to fit a gait to")  # turns codec noise into flicker
-    frames = silhouettes(frames)
+    video = np.asarray(frames, dtype=np.uint8)
+    frames = silhouettes(video)
     if abs(fps - spec.control_hz) > 1e-6:
         raise ValueError(f"the video runs at {fps:g} fps, not {spec.name}'s control rate {spec.control_hz:g} Hz")
     period, periodicity = gait_period(frames, fps)
@@ -224,11 +297,19 @@ def fit_tg_to_video(frames: np.ndarray, fps: float, spec: RobotSpec, cfg: VideoF
     if log:
         log(f"  prior fit: period {period:.2f} frames ({fps / period:.2f} Hz), periodicity {periodicity:.2f}; "
             f"trying {', '.join(f'{fps / p:.2f}' for p in periods)} Hz")
-    with RenderPool(spec, workers) as renders:
-        scorer = _Scorer(frames, renders, int(math.ceil(max(periods))))
-        finalists = _search(scorer, template(spec), periods, fps, cfg)
-    costs = [scorer.cost(p) for p in finalists]                                  # cached: no new renders
-    report = {"period_frames": period, "periodicity": periodicity, "distance": costs[0][0],
+    body, body_costs = spec, {}
+    if bodies and len(bodies) > 1:
+        body, body_costs = video_body(video, fps, bodies)
+        if log:
+            log(f"  prior fit: the video shows a {body.name} body (built-in trots "
+                + ", ".join(f"{n} {c * 255:.1f}" for n, c in body_costs.items()) + " gray levels apart)")
+    with RenderPool(body, workers, fps) as renders:
+        scorer = _Scorer(video, renders, int(math.ceil(max(periods))))
+        drawn = _search(scorer, template(body), periods, fps, cfg)
+    costs = [scorer.cost(p) for p in drawn]                                      # cached: no new renders
+    finalists = [transfer(p, body, spec) for p in drawn]
+    report = {"period_frames": period, "periodicity": periodicity, "body": body.name,
+              "body_distances": body_costs, "transferred": body.name != spec.name, "distance": costs[0][0],
               "candidates": len(scorer.cache), "seconds": time.time() - t0,
               "finalists": [{"offsets": list(relative_offsets(p.offsets)), "frequency_hz": p.frequency, "duty": p.duty,
                              "step_length_m": p.step_length, "swing_height_m": p.swing_height,
@@ -243,6 +324,8 @@ def describe(params: TGParams, report: dict) -> str:
             f"{params.step_length * 100:.1f} cm, swing {params.swing_height * 100:.1f} cm; silhouettes "
             f"{report['distance'] * 255:.2f} gray levels apart ({report['candidates']} candidates, "
             f"{report['seconds']:.0f} s)"
+            + (f"; drawn on the {report['body']} body the video shows, carried over by leg length"
+               if report.get("transferred") else "")
             + (f"; finalist {report['kept_finalist']}: the nearer ones' trackers fell in more than half their "
                "episodes" if report.get("kept_finalist") else "")
             + (f"; hind feet {report['variant']['hind_back_m'] * 100:.1f} cm back, swing x"
