@@ -150,11 +150,12 @@ def _action_options(args: TrainArgs, demo, resume_data: dict | None, run_dir: Pa
 
 def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
     """The TG fitted to the demonstration's frames, the nearest finalist whose warm-start teacher
-    carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`), with
-    hind feet and swing changed where that teacher travels against the video's ground; writes
+    carries the robot when there is a warm start (:mod:`virl_quad.training.prior_check`; when none
+    does, the nearest that does at the robot's built-in trot speed), with hind feet and swing
+    changed where that teacher travels against the video's ground; writes
     prior_fit.json and prior_fit.png (video | fitted gait) into the run folder."""
     from virl_quad import robots
-    from virl_quad.training.prior_check import gait_for_travel, pick_carrying
+    from virl_quad.training.prior_check import MAX_FALL_RATE, gait_for_travel, pick_carrying, slowed_to_carry
     from virl_quad.training.video_prior import describe, fit_tg_to_video, save_fit_sheet, silhouettes
 
     print("fitting the gait prior to the demonstration video ...", flush=True)
@@ -168,6 +169,12 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
         k, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,
                                                    args.run.seed, args.env.randomize, say)
     tg = finalists[k]
+    if args.prior.warm_start_rounds > 0 and report["physics_check"][-1]["fall_rate"] > MAX_FALL_RATE:
+        j, slow, rows = slowed_to_carry(spec, demo, finalists, args.prior.warm_start_steps, args.run.seed,
+                                        args.env.randomize, say)
+        report["physics_check"] += rows
+        if slow is not None:
+            k, tg, report["slowed_to_mps"] = j, slow, rows[-1]["slowed_to_mps"]
     report["kept_finalist"], report["distance"] = k, report["finalists"][k]["distance"]
     if args.prior.warm_start_rounds > 0:
         tg = gait_for_travel(spec, demo, tg, report, args.prior.warm_start_steps, args.run.seed,

@@ -12,7 +12,8 @@ from virl_quad import robots
 from virl_quad.motion.gaits import gait_params
 from virl_quad.policy.tg import TGParams, TrajectoryGenerator
 from virl_quad.training.prior import gait_tg
-from virl_quad.training.prior_check import MAX_FALL_RATE, pick_carrying, teacher_trial
+from virl_quad.training.prior_check import (MAX_FALL_RATE, at_speed, nominal_speed, pick_carrying, slowed_to_carry,
+                                            teacher_trial)
 
 PUPPER = robots.get("pupper")
 STEPS = 400   # control steps per finalist (8 s)
@@ -56,6 +57,23 @@ def test_when_every_finalist_falls_the_least_falling_is_kept_with_a_warning(demo
     assert lines[-1].startswith("warning:") and "cannot carry pupper" in lines[-1]
     with pytest.raises(ValueError):
         pick_carrying(PUPPER, demo, [], STEPS, 0, False, lines.append)
+
+
+def _flying_trot() -> TGParams:
+    """A dog's fast trot on Pupper (1.85 Hz, duty 0.4, 0.6 m/s, 2.4x its built-in trot): the teacher falls."""
+    return at_speed(dataclasses.replace(_trot(), frequency=1.85, duty=0.4), 0.6)
+
+
+def test_a_gait_too_fast_to_carry_the_robot_is_slowed_to_its_built_in_trot_speed(demo) -> None:
+    lines: list[str] = []
+    k, slow, rows = slowed_to_carry(PUPPER, demo, [_trot(), _flying_trot()], STEPS, 0, False, lines.append)
+    assert k == 1 and [r["finalist"] for r in rows] == [1]                # the built-in trot is not faster than itself
+    assert nominal_speed(slow) == pytest.approx(nominal_speed(_trot()))
+    assert (slow.frequency, slow.offsets, slow.duty, slow.swing_height) == (1.85, _trot().offsets, 0.4, 0.03)
+    assert rows[0]["fall_rate"] <= MAX_FALL_RATE and "slowed to 0.25 m/s" in lines[0]
+    fast = teacher_trial(PUPPER, demo, _flying_trot(), STEPS, 0, False)
+    assert fast["fall_rate"] > MAX_FALL_RATE                               # as fast as the video, it falls
+    assert slowed_to_carry(PUPPER, demo, [_trot()], STEPS, 0, False, lines.append) == (-1, None, [])
 
 
 def _video_pace() -> TGParams:

@@ -14,6 +14,9 @@ randomisation) on each finalist, nearest first, and keeps the first whose teache
 at most :data:`MAX_FALL_RATE` of its episodes; when none does, the one that falls least,
 with a warning.
 
+When none does and the video's gait is faster than the robot's built-in trot,
+:func:`slowed_to_carry` tries the finalists again at that trot's speed.
+
 :func:`gait_for_travel` then checks how fast, and which way, the kept finalist's teacher travels.
 A side view at 48 px fixes the phase pattern, period and step well, but not what makes a gait
 carry a Pupper forwards on the physics robot: its hind feet's fore-aft place, how high the feet
@@ -81,6 +84,35 @@ def pick_carrying(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, 
     log(f"warning: every finalist's tracker fell in more than {MAX_FALL_RATE:.0%} of its episodes: this prior "
         f"cannot carry {spec.name}; going on with finalist {best['finalist']}, which falls least")
     return best["finalist"], rows
+
+
+def at_speed(tg: TGParams, speed: float) -> TGParams:
+    """``tg`` with its step length (m) set so that :func:`nominal_speed` is ``speed`` (m/s)."""
+    return TGParams.from_dict({**tg.to_dict(), "step_length": speed * tg.duty / tg.frequency})
+
+
+def slowed_to_carry(spec: RobotSpec, demo, finalists: list[TGParams], steps: int, seed: int, randomize: bool,
+                    log: Callable[[str], None] = print) -> tuple[int, TGParams | None, list[dict]]:
+    """When no finalist's teacher carries the robot: the nearest finalist faster than the robot's
+    built-in trot that carries it at that trot's speed (its step shortened; frequency, phase
+    pattern, duty and swing kept), as ``(index, TG, rows)``; ``(-1, None, rows)`` when none does.
+    A video may show a gait faster than a TG carries the learner at (a dog's flying trot for a
+    Pupper): its timing and pattern are what the robot can still take from it."""
+    from virl_quad.training.video_prior import template
+
+    speed = nominal_speed(template(spec))                                      # m/s
+    rows = []
+    for k, tg in enumerate(finalists):
+        if nominal_speed(tg) <= speed * 1.01:
+            continue
+        slow = at_speed(tg, speed)
+        row = {"finalist": k, "slowed_to_mps": speed, **teacher_trial(spec, demo, slow, steps, seed, randomize)}
+        rows.append(row)
+        log(f"  physics check, finalist {k} slowed to {speed:.2f} m/s (step {slow.step_length * 100:.1f} cm): its "
+            f"tracker fell in {row['falls']} of {row['episodes']} episodes, mean travel {row['travel_m']:+.2f} m")
+        if row["fall_rate"] <= MAX_FALL_RATE:
+            return k, slow, rows
+    return -1, None, rows
 
 
 #: Share of its TG's own speed (step length x frequency / duty) under which a teacher's gait is
@@ -163,7 +195,8 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
     from virl_quad.reward.egomotion import clip_speed
 
     slide = clip_speed(demo.frames, demo.fps)           # px per window: < 0 where the subject goes forwards
-    trial = next((r for r in report.get("physics_check", []) if r["finalist"] == report["kept_finalist"]), None)
+    trial = next((r for r in reversed(report.get("physics_check", []))       # a slowed finalist's row is last
+                  if r["finalist"] == report["kept_finalist"]), None)
     report["variant"] = None
     if slide is None or trial is None:
         return tg

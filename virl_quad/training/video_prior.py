@@ -328,6 +328,8 @@ def describe(params: TGParams, report: dict) -> str:
                if report.get("transferred") else "")
             + (f"; finalist {report['kept_finalist']}: the nearer ones' trackers fell in more than half their "
                "episodes" if report.get("kept_finalist") else "")
+            + (f"; slowed to {report['slowed_to_mps']:.2f} m/s: at the video's speed its tracker fell in more than "
+               "half its episodes" if report.get("slowed_to_mps") else "")
             + (f"; hind feet {report['variant']['hind_back_m'] * 100:.1f} cm back, swing x"
                f"{report['variant']['swing_scale']:g}, step x{report['variant']['step_scale']:g}: "
                "its tracker travels further the way the video's ground slides" if report.get("variant") else ""))
