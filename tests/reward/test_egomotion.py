@@ -34,6 +34,24 @@ def test_a_known_slide_of_the_ground_is_measured(shift: int) -> None:
     assert abs(float(got[0]) - shift) < 0.3
 
 
+def test_a_textured_ground_is_measured_over_its_range_of_levels() -> None:
+    """A checker blended between neighbouring frames (a video resampled to the control rate) has
+    no flat levels, only a range; its slide is measured over that range, and the agent's own
+    frames on the flat checker are measured by their own levels."""
+    frames = _scene(np.round(-1.0 * np.arange(41)).astype(int)).astype(np.float32)
+    blended = np.clip(0.5 * (frames[:-1] + frames[1:]) + np.random.default_rng(0).normal(0, 4, (40, 48, 48)),
+                      0, 255).astype(np.uint8)                   # many ground levels, and the robot block kept
+    levels = eg.ground_levels(blended)
+    assert levels[0] > ROBOT + 10 and levels[-1] < SKY - 50 and len(levels) > 40
+    k = eg.window_steps(50.0)
+    assert eg.clip_speed(blended, 50.0, levels, k) == pytest.approx(-k, abs=0.5)
+    term = eg.VideoSpeedTerm(-float(k), 50.0, levels, 1, k)
+    flat = _scene(np.round(-1.0 * np.arange(3 * k)).astype(int))
+    assert list(term.find_agent_ground(flat)) == list(eg.ground_levels(flat))
+    reward, valid, shift = term.rollout(torch.from_numpy(flat[:, None]), torch.zeros(3 * k, 1, dtype=torch.bool))
+    assert bool(valid.any()) and float(shift[valid].mean()) == pytest.approx(-k, abs=0.5)
+
+
 def test_no_pattern_no_shift() -> None:
     plain = np.full((2, 48, 48), 120, np.uint8)
     plain[:, :16] = SKY

@@ -11,9 +11,11 @@ shift (px) that best maps the earlier frame's ground pixels onto the later frame
 masked sum of squared differences over integer shifts (the ground blurred first so that
 the cost is smooth; every shift's sum at once, by FFT) and a parabola through the best one for the sub-pixel part. The same
 estimator runs on the demonstration and on the agent's frames, so its scale (px per m,
-which perspective varies by row) cancels in their comparison. It needs a ground with a
-pattern the camera sees (the ``checker`` ground); on a plain ground or a textured video
-background there is nothing to measure, and :func:`clip_speed` says so (None).
+which perspective varies by row) cancels in their comparison; a robot's follow camera stands
+off in proportion to its size, so a video of another robot compares too, in body lengths, as
+a retargeted clip does. It needs a ground with a pattern the camera sees (the ``checker``
+ground); on a plain ground there is nothing to measure, and :func:`clip_speed` says so (None).
+Each video's ground is found in its own frames (:func:`ground_levels`).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from virl_quad.reward.frames import BORDER_ROWS, flat_levels, level_table
+from virl_quad.reward.frames import BORDER_ROWS, flat_levels, level_table, textured_ground
 
 WINDOW_S = 0.16      # s between the two frames compared (8 steps at Pupper's 50 Hz)
 MAX_DX = 8           # px, largest horizontal shift searched (the checker's period is ~20 px)
@@ -69,8 +71,14 @@ def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None
 
 def ground_levels(frames: np.ndarray) -> np.ndarray:
     """The gray levels of a video's ground (T, H, W) uint8: the flat levels of its bottom rows
-    (:func:`~virl_quad.reward.frames.flat_levels`), the sky left out. int64, sorted."""
-    return flat_levels(np.asarray(frames, dtype=np.uint8)[:, -BORDER_ROWS:])
+    (:func:`~virl_quad.reward.frames.flat_levels`), the sky left out; for a textured ground
+    (:func:`~virl_quad.reward.frames.textured_ground`: a checker rendered large and shrunk), every
+    level of its range. int64, sorted."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    ground = textured_ground(frames)
+    if ground is not None:
+        return np.arange(ground[0], ground[1] + 1, dtype=np.int64)
+    return flat_levels(frames[:, -BORDER_ROWS:])
 
 
 def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -173,8 +181,12 @@ class VideoSpeedTerm:
     none). The last frames and episode ages of every env carry over from one rollout to the next.
     """
 
-    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int, window: int) -> None:
+    def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int, window: int,
+                 agent_levels: np.ndarray | None = None) -> None:
+        """``levels``: the demonstration's ground levels (:func:`ground_levels`); ``agent_levels``: the
+        agent frames' (None: the same; set them later with :meth:`find_agent_ground`)."""
         self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
+        self.agent_levels = self.levels if agent_levels is None else np.asarray(agent_levels, dtype=np.int64)
         self.sigma = max(abs(self.target), 1.0)                  # px per window
         self.fps = float(fps)
         self.k = int(window)                                     # frames: the window the target was measured over
@@ -183,6 +195,12 @@ class VideoSpeedTerm:
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next
         self._held = torch.zeros(self.num_envs)                  # px, the latest block's shift
         self._has = torch.zeros(self.num_envs, dtype=torch.bool)
+
+    def find_agent_ground(self, agent: np.ndarray | torch.Tensor) -> np.ndarray:
+        """Take the agent's ground levels from its own frames [T, H, W] uint8 (a demonstration whose
+        ground looks unlike the env's: a larger render shrunk, another robot's video); returns them."""
+        self.agent_levels = ground_levels(np.asarray(agent, dtype=np.uint8))
+        return self.agent_levels
 
     def rollout(self, agent: torch.Tensor, dones: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """For frames [T, N, H, W] uint8 and ``dones`` [T, N] (frame t ends its episode): the term's
@@ -202,7 +220,7 @@ class VideoSpeedTerm:
         t_idx, n_idx = ends.nonzero(as_tuple=True)
         shifts = torch.full((steps, n), float("nan"))
         if len(t_idx):
-            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.levels)
+            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.agent_levels)
         given = torch.full((steps, n), float("nan"))
         held, has = self._held.clone(), self._has.clone()
         for t in range(steps):

@@ -92,6 +92,24 @@ PAINT = 255              # the background's new gray level: white (a mid gray, t
                          # let the distance model collapse, every frame alike: docs/experiments.md)
 
 
+FLAT_SHARE = 0.8         # share of a video's bottom rows its flat background levels must fill; else its
+                         # ground is textured (a checker rendered large and shrunk to 48 px blurs
+                         # into many levels)
+
+
+def textured_ground(frames: np.ndarray) -> tuple[int, int] | None:
+    """The gray-level range (lo, hi) of a video's ground (T, H, W) uint8 when it is textured: its
+    flat levels (:func:`background_levels`) fill less than :data:`FLAT_SHARE` of its bottom
+    :data:`BORDER_ROWS` rows; the 1st to 99th percentile of those rows, widened by
+    :data:`TOLERANCE`. None for a flat ground."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    ground = frames[:, -BORDER_ROWS:]
+    if level_table(background_levels(frames))[ground].mean() >= FLAT_SHARE:
+        return None
+    lo, hi = np.percentile(ground, [1, 99])
+    return max(0, int(lo) - TOLERANCE), min(255, int(hi) + TOLERANCE)
+
+
 def background_levels(frames: np.ndarray) -> np.ndarray:
     """The gray levels that count as the flat background of a video (T, H, W) uint8: those filling
     at least :data:`BACKGROUND_SHARE` of its top or bottom :data:`BORDER_ROWS` rows (sky and ground

@@ -25,6 +25,7 @@ from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
 from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, clip_window, ground_levels
+from virl_quad.reward.frames import textured_ground
 
 
 def step_frames(obs: TensorDict, dones: torch.Tensor, extras: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -50,6 +51,7 @@ class LearnedReward:
         cfg = RewardConfig.make(variant=variant, lr=lr, clips_cyclic=cyclic, w_d=w_d, pair_weights=weights)
         self.model = build_reward(cfg, demo_frames, other_clips, seed, device)
         self.speed, self.speed_weight, self.speed_note = None, float(video_speed_weight), ""
+        self._find_agent_ground = textured_ground(demo_frames) is not None   # the env's ground looks otherwise
         if self.speed_weight > 0:
             self.speed, self.speed_note = _speed_term(demo_frames, fps, num_envs, self.speed_weight)
         self.updates = updates
@@ -79,6 +81,9 @@ class LearnedReward:
         rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
         self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
         if self.speed is not None:
+            if self._find_agent_ground:                  # once, from the first rollout's first env
+                self.speed.find_agent_ground(agent[:, 0])
+                self._find_agent_ground = False
             r_speed, valid, shift = self.speed.rollout(agent, dones)
             w = self.speed_weight
             rewards = torch.where(valid.to(rewards.device), (1 - w) * rewards + w * r_speed.to(rewards.device), rewards)

@@ -60,8 +60,6 @@ from virl_quad.training.synthesis import RenderPool
 GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
 MIN_PERIODICITY = 0.3       # below this the video shows no periodic motion (1: exactly periodic)
 MIN_MOTION = 1e-4           # mean squared frame change (intensity in [0, 1]) below which a video is still
-FLAT_SHARE = 0.8            # share of a video's bottom rows its flat gray levels must fill: else its ground
-                            # is textured and silhouettes keep the pixels darker than the ground
 
 
 @dataclass(frozen=True)
@@ -78,19 +76,14 @@ class VideoFitConfig:
 
 
 def dark_level(video: np.ndarray) -> int | None:
-    """For a video (T, H, W) uint8 on a textured ground (painting its flat levels clears less than
-    :data:`FLAT_SHARE` of its bottom rows: a checker seen in perspective and shrunk, whose squares
-    blur into many levels), the gray level below which a pixel is the subject: the ground's darkest
-    (1st percentile of the bottom rows) less the painting's tolerance. None for a flat background,
-    or a textured one with nothing darker than it (the frames are then used as they are)."""
-    from virl_quad.reward.frames import BORDER_ROWS, TOLERANCE, background_levels, level_table
+    """For a video (T, H, W) uint8 on a textured ground
+    (:func:`virl_quad.reward.frames.textured_ground`), the gray level below which a pixel is the
+    subject: the low end of the ground's range. None for a flat ground, or a textured one with
+    nothing darker than it (the frames are then used as they are)."""
+    from virl_quad.reward.frames import textured_ground
 
-    video = np.asarray(video, dtype=np.uint8)
-    ground = video[:, -BORDER_ROWS:]
-    if level_table(background_levels(video))[ground].mean() >= FLAT_SHARE:
-        return None
-    level = int(np.percentile(ground, 1)) - TOLERANCE
-    return level if level > 0 else None
+    ground = textured_ground(video)
+    return ground[0] if ground is not None and ground[0] > 0 else None
 
 
 def silhouettes(frames: np.ndarray, video: np.ndarray | None = None) -> np.ndarray:
