@@ -72,7 +72,7 @@ def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None
 def ground_levels(frames: np.ndarray) -> np.ndarray:
     """The gray levels of a video's ground (T, H, W) uint8: the flat levels of its bottom rows
     (:func:`~virl_quad.reward.frames.flat_levels`), the sky left out; for a textured ground
-    (:func:`~virl_quad.reward.frames.textured_ground`: a checker rendered large and shrunk), every
+    (:func:`~virl_quad.reward.frames.textured_ground`: a checker blended between frames), every
     level of its range. int64, sorted."""
     frames = np.asarray(frames, dtype=np.uint8)
     ground = textured_ground(frames)
@@ -198,7 +198,7 @@ class VideoSpeedTerm:
 
     def find_agent_ground(self, agent: np.ndarray | torch.Tensor) -> np.ndarray:
         """Take the agent's ground levels from its own frames [T, H, W] uint8 (a demonstration whose
-        ground looks unlike the env's: a larger render shrunk, another robot's video); returns them."""
+        ground looks unlike the env's: a video resampled to the control rate); returns them."""
         self.agent_levels = ground_levels(np.asarray(agent, dtype=np.uint8))
         return self.agent_levels
 

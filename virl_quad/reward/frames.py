@@ -93,8 +93,8 @@ PAINT = 255              # the background's new gray level: white (a mid gray, t
 
 
 FLAT_SHARE = 0.8         # share of a video's bottom rows its flat background levels must fill; else its
-                         # ground is textured (a checker rendered large and shrunk to 48 px blurs
-                         # into many levels)
+                         # ground is textured (a video resampled to the control rate blends the
+                         # checker between frames into many levels)
 
 
 def textured_ground(frames: np.ndarray) -> tuple[int, int] | None:

@@ -7,8 +7,8 @@ like the demonstration video, found without the demonstration's reference motion
    top and bottom rows: sky and ground) is painted white. The follow camera sees the ground
    scroll by at the robot's speed, a second period (a checker square per 0.5 s at 0.25 m/s)
    that has nothing to do with the legs; a TG cannot say where along the ground it is. A
-   ground with no flat levels (a checker rendered large and shrunk to 48 px blurs into many
-   levels) keeps only the pixels darker than the ground's darkest level, in the video and the
+   ground with no flat levels (a video resampled to the control rate blends each checker
+   square's edge between frames into many levels) keeps only the pixels darker than the ground's darkest level, in the video and the
    candidates alike.
 1. **Period** (:func:`gait_period`): the lag, within the gait band, at which the video's
    silhouettes are most alike (self-similarity). Half a trot or pace cycle looks almost
