@@ -7,8 +7,8 @@ For each video: a built-in gait's demonstration, or a dog motion-capture clip fr
 ``--motions`` retargeted to the robot and rendered (``dog_trot`` -> ``dog_trot.txt``; skipped
 when the folder is absent). With ``--shown-on ROBOT`` the clips are instead retargeted to that
 robot, rendered as ``demo render --video`` writes an ``.mp4`` (the larger RGB render) and
-imported for ``--robot`` (the issue's dog video); the fit then picks the body the video shows
-among the registered robots, as training does. The TG is fitted to the frames alone
+imported for ``--robot`` (the issue's dog video). As in training, the fit draws its candidates on
+the registered robot whose body the video shows. The TG is fitted to the frames alone
 (``virl_quad.training.video_prior``); the truth is the least-squares fit to the reference
 motion (``virl_quad.training.prior.fit_tg``). A pattern is right when every leg's phase
 offset relative to leg FR is within 1/8 cycle of the truth's. Prints a markdown table and the
@@ -56,7 +56,7 @@ def main() -> int:
     p.add_argument("--sheets", type=Path, help="write the contact sheets (video | fit) into this folder")
     p.add_argument("--shown-on", default="", help="render the motion clips on this robot as an .mp4 and import it")
     a = p.parse_args()
-    bodies = [robots.get(n) for n in robots.names()] if a.shown_on else None
+    bodies = [robots.get(n) for n in robots.names()]          # the fit picks the body the video shows, as training does
     spec = robots.get(a.robot)
     print("| video | truth (FR, FL, RR, RL) | fitted | Hz fitted (truth) | difference (gray levels) | body drawn on | s | pattern |")
     print("|---|---|---|---|---|---|---|---|")
