@@ -169,7 +169,7 @@ def _prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
         k, report["physics_check"] = pick_carrying(spec, demo, finalists, args.prior.warm_start_steps,
                                                    args.run.seed, args.env.randomize, say)
     tg = finalists[k]
-    if args.prior.warm_start_rounds > 0 and report["physics_check"][-1]["fall_rate"] > MAX_FALL_RATE:
+    if args.prior.warm_start_rounds > 0 and report["physics_check"][k]["fall_rate"] > MAX_FALL_RATE:
         j, slow, rows = slowed_to_carry(spec, demo, finalists, args.prior.warm_start_steps, args.run.seed,
                                         args.env.randomize, say)
         report["physics_check"] += rows

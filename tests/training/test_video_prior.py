@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +55,7 @@ def test_silhouettes_on_a_textured_ground_keep_what_is_darker_than_it() -> None:
 def test_a_gait_fitted_on_another_body_is_carried_over_by_leg_length() -> None:
     from virl_quad.policy.tg import TrajectoryGenerator
 
-    fitted = replace_tg(template(LAIKAGO), frequency=1.85, offsets=(0.0, 0.5, 0.5, 0.0), duty=0.4)
+    fitted = replace(template(LAIKAGO), frequency=1.85, offsets=(0.0, 0.5, 0.5, 0.0), duty=0.4)
     out = transfer(fitted, LAIKAGO, PUPPER)
     k = leg_length(PUPPER) / leg_length(LAIKAGO)
     assert 0.2 < k < 0.6
@@ -66,19 +67,12 @@ def test_a_gait_fitted_on_another_body_is_carried_over_by_leg_length() -> None:
     assert transfer(fitted, LAIKAGO, LAIKAGO) is fitted
 
 
-def replace_tg(params: TGParams, **changes) -> TGParams:
-    """``params`` with some fields changed."""
-    from dataclasses import replace
-
-    return replace(params, **changes)
-
-
 def test_the_body_a_video_shows_is_found() -> None:
     from virl_quad.training.synthesis import Synthesizer
 
     synth = Synthesizer(LAIKAGO, PUPPER.control_hz)                            # a Laikago seen at Pupper's rate
     try:
-        laikago_video = synth.render(replace_tg(template(LAIKAGO), frequency=2.0), 60)
+        laikago_video = synth.render(replace(template(LAIKAGO), frequency=2.0), 60)
     finally:
         synth.close()
     body, costs = video_body(laikago_video, PUPPER.control_hz, [PUPPER, LAIKAGO])

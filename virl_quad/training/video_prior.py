@@ -8,8 +8,8 @@ like the demonstration video, found without the demonstration's reference motion
    scroll by at the robot's speed, a second period (a checker square per 0.5 s at 0.25 m/s)
    that has nothing to do with the legs; a TG cannot say where along the ground it is. A
    ground with no flat levels (a video resampled to the control rate blends each checker
-   square's edge between frames into many levels) keeps only the pixels darker than the ground's darkest level, in the video and the
-   candidates alike.
+   square's edge between frames into many levels) keeps only the pixels darker than the
+   ground's darkest level, in the video and the candidates alike.
 1. **Period** (:func:`gait_period`): the lag, within the gait band, at which the video's
    silhouettes are most alike (self-similarity). Half a trot or pace cycle looks almost
    like a whole one from the side (near and far legs swap), so the search tries the
@@ -92,9 +92,13 @@ def silhouettes(frames: np.ndarray, video: np.ndarray | None = None) -> np.ndarr
     (:func:`virl_quad.reward.frames.background_levels`; the same for a video and a render on
     another ground); on a textured one (:func:`dark_level`), black where a pixel is darker than
     the ground's darkest level and white elsewhere (a robot darker than its ground)."""
+    return _silhouettes(frames, dark_level(frames if video is None else video))
+
+
+def _silhouettes(frames: np.ndarray, level: int | None) -> np.ndarray:
+    """:func:`silhouettes` with the video's :func:`dark_level` found once by the caller."""
     from virl_quad.reward.frames import background_levels, paint
 
-    level = dark_level(frames if video is None else video)
     if level is None:
         return paint(frames, background_levels(frames))
     return np.where(np.asarray(frames) < level, 0, 255).astype(np.uint8)
@@ -176,14 +180,15 @@ def video_body(video: np.ndarray, fps: float, bodies: list[RobotSpec]) -> tuple[
     ``fps`` (Hz), is nearest a video (T, 48, 48) uint8, both as silhouettes by the video's rule;
     returns it and each body's distance (gray levels / 255, at the best time shift over one trot
     cycle)."""
-    target = torch.from_numpy(silhouettes(video)).float() / 255.0
+    level = dark_level(video)
+    target = torch.from_numpy(_silhouettes(video, level)).float() / 255.0
     costs: dict[str, float] = {}
     for body in bodies:
         base = template(body)
         shifts = int(math.ceil(fps / base.frequency))
         with RenderPool(body, 1, fps) as pool:
             raw = pool.render_many([base], len(target) + shifts)[0]
-        f = torch.from_numpy(silhouettes(raw, video)).float() / 255.0
+        f = torch.from_numpy(_silhouettes(raw, level)).float() / 255.0
         costs[body.name] = float(min((target - f[s:s + len(target)]).abs().mean() for s in range(shifts)))
     return min(bodies, key=lambda b: costs[b.name]), costs
 
@@ -200,8 +205,8 @@ class _Scorer:
     video's rule: the mean absolute difference (gray levels / 255) at the best time shift."""
 
     def __init__(self, video: np.ndarray, renders: RenderPool, shifts: int) -> None:
-        self.raw_video, self.renders, self.shifts = video, renders, shifts
-        self.video = silhouettes(video)
+        self.renders, self.shifts, self.level = renders, shifts, dark_level(video)
+        self.video = _silhouettes(video, self.level)
         self.video_f = torch.from_numpy(self.video).float() / 255.0
         self.cache: dict[TGParams, tuple[float, int, np.ndarray | None]] = {}
 
@@ -213,7 +218,7 @@ class _Scorer:
             if raw is None:
                 self.cache[params] = (math.inf, 0, None)
                 continue
-            frames = silhouettes(raw, self.raw_video)
+            frames = _silhouettes(raw, self.level)
             f = torch.from_numpy(frames).float() / 255.0
             costs = torch.stack([(self.video_f - f[s:s + n]).abs().mean() for s in range(self.shifts)])
             s = int(torch.argmin(costs))
