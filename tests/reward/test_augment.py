@@ -52,3 +52,36 @@ def test_warped_window_speed_range():
     short = np.zeros((30, 48, 48), np.uint8)
     capped = [augment.warped_window(rng, short, 25, 0.5, 2.0)[1] for _ in range(200)]
     assert max(capped) <= 29 / 24 + 1e-9
+
+
+def _square_frames(L: int = 3, B: int = 6) -> np.ndarray:
+    """[L, B, 48, 48] white frames with a dark 8 px square in the middle (a painted render's look)."""
+    x = np.ones((L, B, 48, 48), dtype=np.float32)
+    x[:, :, 20:28, 20:28] = 0.0
+    return x
+
+
+def test_view_jitter_moves_each_sequence_by_its_own_small_camera_move():
+    x = _square_frames()
+    y = augment.view_jitter(x, np.random.default_rng(0), 0.05, 2.0)
+    assert y.shape == x.shape and y.dtype == np.float32 and y.min() >= 0.0 and y.max() <= 1.0
+    assert np.array_equal(y[0], y[2])                  # one move for every frame of a sequence
+    assert any(not np.allclose(y[0, 0], y[0, b]) for b in range(1, 6))   # each sequence its own
+    for b in range(6):
+        dark = 1.0 - y[0, b]
+        rows, cols = np.mgrid[0:48, 0:48]
+        cy, cx = (dark * rows).sum() / dark.sum(), (dark * cols).sum() / dark.sum()
+        assert abs(cy - 23.5) <= 2.0 + 1e-3 and abs(cx - 23.5) <= 1.0 + 1e-3      # px
+        assert 64 * 0.95 ** 2 - 1 <= dark.sum() <= 64 * 1.05 ** 2 + 1               # area: zoom +-5 %
+    assert np.array_equal(augment.view_jitter(x, np.random.default_rng(0), 0.0, 0.0), x)
+
+
+def test_view_jitter_zooms_and_shifts_as_far_as_asked():
+    x = _square_frames(1, 400)
+    y = augment.view_jitter(x, np.random.default_rng(1), 0.2, 4.0)
+    dark = 1.0 - y[0]
+    rows = np.arange(48)[None, :, None]
+    cy = (dark * rows).sum((1, 2)) / dark.sum((1, 2))
+    assert cy.min() < 23.5 - 3.0 and cy.max() > 23.5 + 3.0          # shifts fill the range
+    area = dark.sum((1, 2)) / 64
+    assert area.min() < 0.8 ** 2 * 1.1 and area.max() > 1.2 ** 2 * 0.9   # zooms fill the range

@@ -63,3 +63,22 @@ def test_sequence_decoder_outputs_last_frame_first():
     err_fwd = ((dec - frames) ** 2).mean()
     assert err_rev < 0.06 and err_rev < err_fwd / 4, (float(err_rev), float(err_fwd))
     assert torch.allclose(forward_order, dec.flip(0))
+
+
+
+def test_latent_norm_spreads_the_frames_of_a_render():
+    """A fresh encoder maps a painted render's mostly white frames almost alike (a spread of e
+    about 1e-3, where training can stall with every behaviour rewarded 1); batch-normalised
+    before the sigmoid, e spreads over the frames from the first update."""
+    from virl_quad import demo as demo_lib
+
+    frames = torch.from_numpy(demo_lib.load("trot", "pupper").frames[:256]).float() / 255.0
+    for seed in (0, 1, 2):
+        spreads = {}
+        for norm in (False, True):
+            torch.manual_seed(seed)
+            phi = DistanceModel(RewardConfig.make(latent_norm=norm)).phi.train()
+            with torch.no_grad():
+                spreads[norm] = float(phi(frames)[0].std(0).mean())
+        assert spreads[False] < 0.01 and spreads[True] > 0.1, (seed, spreads)
+    assert isinstance(DistanceModel(RewardConfig.make(latent_norm=False)).phi.norm, torch.nn.Identity)

@@ -198,6 +198,9 @@ def test_rewards_come_from_a_slowly_moving_copy(small_cfg, demo, other, agent_ep
     for slow, fast, old in zip(rm.reward_net.parameters(), rm.net.parameters(), before):
         assert torch.allclose(slow, keep * old + (1 - keep) * fast, atol=1e-6)
     assert any(not torch.equal(s, f) for s, f in zip(rm.reward_net.parameters(), rm.net.parameters()))
+    # the latent's batch-norm statistics are the trained model's, not an average from their start
+    assert float(rm.net.phi.norm.running_var.sub(1.0).abs().max()) > 1e-3
+    assert all(torch.equal(s, f) for s, f in zip(rm.reward_net.buffers(), rm.net.buffers()))
     plain = make("virl", replace_options(small_cfg, ema=0.0), demo, other, agent_episode, updates=1)
     assert plain.reward_net is plain.net
     with pytest.raises(ValueError, match="ema"):
@@ -233,3 +236,13 @@ def test_the_encoding_spread_is_logged_and_reads_0_for_a_collapsed_encoder(small
     assert rm.encoding_spread() < 1e-9
     agent, expert, dones = rollout(1)
     assert torch.all(rm.recompute(agent, expert, dones, rm.stream_state(dones.shape[1])) > 0.999)
+
+
+def test_a_config_saved_before_the_latent_norm_and_view_jitter_loads_without_them(small_cfg, demo):
+    """An older model's saved config lacks the settings added since: it loads as it was trained."""
+    old = {k: v for k, v in small_cfg.to_dict().items() if k not in ("latent_norm", "view_zoom", "view_shift")}
+    cfg = RewardConfig.from_dict(old)
+    assert not cfg.arch.latent_norm and cfg.pairs.view_zoom == 0.0 and cfg.pairs.view_shift == 0.0
+    assert isinstance(build_reward(cfg, demo).net.phi.norm, torch.nn.Identity)
+    with pytest.raises(ValueError, match="view_zoom"):
+        RewardConfig.make(view_zoom=0.6).validate()

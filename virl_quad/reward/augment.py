@@ -7,11 +7,17 @@ the current mean episode length clipped to [window_min, window_max].
 
 Time warping: the clip is replayed at speed delta (frames of the clip per
 output frame), with linear interpolation between neighbouring frames.
+
+View jitter: each sequence is seen through its own small camera move, the same
+zoom and shift for all of its frames (the agent's follow camera is jittered once
+per episode).
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
+from torch.nn import functional as F
 
 
 def eesp_max_length(mean_episode_length: float, lo: int, hi: int) -> int:
@@ -91,3 +97,23 @@ def warped_window(rng: np.random.Generator, clip: np.ndarray, need: int, lo: flo
     span = speed * (need - 1)
     start = rng.uniform(0.0, T) if cyclic else rng.uniform(0.0, max(T - 1 - span, 0.0))
     return time_warp(clip, start, speed, need, cyclic), speed
+
+
+def view_jitter(x: np.ndarray, rng: np.random.Generator, zoom: float, shift: float) -> np.ndarray:
+    """Sequences x float32 [L, B, H, W] in [0, 1], each seen through its own camera move: zoomed
+    by a factor in [1 - zoom, 1 + zoom] (log-uniform) about the centre and shifted by up to
+    ``shift`` px vertically and ``shift / 2`` horizontally (bilinear; the edge pixels, a painted
+    background, extend outwards). The same move for every frame of a sequence."""
+    if zoom == 0.0 and shift == 0.0:
+        return x
+    L, B, H, W = x.shape
+    scale = np.exp(rng.uniform(np.log(1.0 - zoom), np.log(1.0 + zoom), B))
+    dy = rng.uniform(-shift, shift, B) * 2.0 / H            # px -> normalised image coordinates
+    dx = rng.uniform(-0.5 * shift, 0.5 * shift, B) * 2.0 / W
+    theta = np.zeros((B, 2, 3), dtype=np.float32)
+    theta[:, 0, 0] = theta[:, 1, 1] = 1.0 / scale            # sampling grid: output -> input
+    theta[:, 0, 2], theta[:, 1, 2] = dx / scale, dy / scale  # the centre moves by exactly (dx, dy)
+    t = torch.from_numpy(np.ascontiguousarray(x.transpose(1, 0, 2, 3)))      # [B, L, H, W]: frames as channels
+    grid = F.affine_grid(torch.from_numpy(theta), [B, L, H, W], align_corners=False)
+    out = F.grid_sample(t, grid, mode="bilinear", padding_mode="border", align_corners=False)
+    return out.numpy().transpose(1, 0, 2, 3).copy()

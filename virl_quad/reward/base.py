@@ -146,6 +146,10 @@ class RewardModel:
             with torch.no_grad():
                 for slow, fast in zip(self.reward_net.parameters(), self.net.parameters()):
                     slow.mul_(keep).add_(fast, alpha=1.0 - keep)
+                # batch-norm statistics: the trained model's (an average from their initial
+                # value would scale e by statistics that no weights ever had)
+                for slow, fast in zip(self.reward_net.buffers(), self.net.buffers()):
+                    slow.copy_(fast)
         return logs
 
     # -- rewards -----------------------------------------------------------------------------

@@ -42,6 +42,11 @@ class ArchitectureConfig:
     frame_latent: int = 64            # paper: dense 64 (sigmoid) = e_t
     dropout: float = 0.1              # probability of dropping a whole conv1 feature map
                                       # (Dropout2d, between the conv layers; project choice)
+    latent_norm: bool = True          # batch-normalise e's pre-activation before its sigmoid (project
+                                      # choice): a fresh encoder maps the mostly-white frames almost
+                                      # alike (spread of e ~1e-3) and can stay there, its sigmoid
+                                      # saturated, every behaviour then rewarded 1; normalised, e
+                                      # spreads from the first updates
     lstm_units: int = 128             # paper: LSTM 128 units
     seq_latent: int = 64              # paper: dense 64 = h_t
     decoder_lstm_units: int = 128     # decoder LSTM size (project choice: mirror of the encoder)
@@ -88,6 +93,13 @@ class PairConfig:
                                       # places, and say nothing about the legs (project choice)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from
                                       # them wrap around their end (else they must fit inside)
+    view_zoom: float = 0.05           # every window of every pair is seen through its own camera
+                                      # move: zoomed by up to this fraction (log-uniform) and shifted
+    view_shift: float = 2.0           # by up to this many px vertically, half as many horizontally
+                                      # (project choice, the size of the agent camera's per-episode
+                                      # jitter, distance and height +-5 %): only agent frames vary
+                                      # their viewpoint, and a model that reads it ranks behaviours
+                                      # by the camera draw instead of the motion. 0 and 0: off
     warp_min: float = 0.5             # paper: demonstration replay speed range [0.5, 2.0]
     warp_max: float = 2.0             # (sampled log-uniformly, project choice)
 
@@ -152,6 +164,9 @@ class RewardConfig(Sectioned):
             raise ValueError(f"image_size must be 48 (the paper's frame size), got {self.arch.image_size}")
         if not 0.0 <= self.arch.dropout < 1.0:
             raise ValueError(f"dropout must be in [0, 1), got {self.arch.dropout}")
+        if not 0.0 <= self.pairs.view_zoom < 0.5 or self.pairs.view_shift < 0:
+            raise ValueError(f"view_zoom must be in [0, 0.5) and view_shift >= 0, got {self.pairs.view_zoom}, "
+                             f"{self.pairs.view_shift}")
         if self.pairs.batch_pairs < 2 or self.pairs.batch_pairs % 2:
             raise ValueError(f"batch_pairs must be even and >= 2, got {self.pairs.batch_pairs}")
         if not 2 <= self.pairs.window_min <= self.pairs.window_max:
@@ -212,6 +227,9 @@ def without_retired(d: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in d.items() if k not in RETIRED_FIELDS}
     out.setdefault("paint_background", False)        # saved before backgrounds were painted
     out.setdefault("ema", 0.0)                       # saved before rewards came from a slow copy
+    out.setdefault("latent_norm", False)             # saved before e was normalised
+    out.setdefault("view_zoom", 0.0)                 # saved before windows were seen through
+    out.setdefault("view_shift", 0.0)                # a moved camera
     if isinstance(out.get("pair_weights"), dict):
         out["pair_weights"] = {k: v for k, v in out["pair_weights"].items() if k not in RETIRED_PAIRS}
     return out

@@ -19,7 +19,8 @@ def conv_out(size: int, kernel: int, stride: int) -> int:
 
 
 class FrameEncoder(nn.Module):
-    """phi: conv 8@6x6/2 -> dropout -> conv 16@4x4/2 -> dense 256 -> dense 64 (sigmoid) = mu; log-variance head."""
+    """phi: conv 8@6x6/2 -> dropout -> conv 16@4x4/2 -> dense 256 -> dense 64 (batch norm with
+    ``latent_norm``, sigmoid) = mu; log-variance head."""
 
     def __init__(self, cfg: RewardConfig) -> None:
         super().__init__()
@@ -34,6 +35,7 @@ class FrameEncoder(nn.Module):
         self.fc = nn.Linear(a.conv2_filters * n2 * n2, a.dense_units)
         self.mu = nn.Linear(a.dense_units, a.frame_latent)
         self.logvar = nn.Linear(a.dense_units, a.frame_latent)
+        self.norm = nn.BatchNorm1d(a.frame_latent) if a.latent_norm else nn.Identity()
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Frames [..., H, W] in [0, 1] -> (mu, logvar), each [..., frame_latent]; mu in (0, 1)."""
@@ -42,7 +44,7 @@ class FrameEncoder(nn.Module):
         z = self.drop(F.relu(self.conv1(z)))
         z = F.relu(self.conv2(z))
         z = F.relu(self.fc(z.flatten(1)))
-        mu = torch.sigmoid(self.mu(z))
+        mu = torch.sigmoid(self.norm(self.mu(z)))
         logvar = self.logvar(z).clamp(-12.0, 6.0)
         return mu.reshape(*lead, -1), logvar.reshape(*lead, -1)
 

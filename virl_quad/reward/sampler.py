@@ -130,7 +130,8 @@ class PairSampler:
         pos, neg = self.available(L, eligible.size > 0)
         kinds = [self._pick(rng, pos) for _ in range(B // 2)] + [self._pick(rng, neg) for _ in range(B - B // 2)]
         made = [self.make_pair(rng, k, L, eligible) for k in kinds]
-        a = np.stack([m[0] for m in made], axis=1)
-        b = np.stack([m[1] for m in made], axis=1)
+        view = (rng, self.cfg.pairs.view_zoom, self.cfg.pairs.view_shift)
+        a = augment.view_jitter(np.stack([m[0] for m in made], axis=1), *view)
+        b = augment.view_jitter(np.stack([m[1] for m in made], axis=1), *view)
         y = np.array([m[2] for m in made], dtype=np.float32)
         return Batch(a, b, y, kinds)
