@@ -17,10 +17,17 @@ climbs the score; near 0, the reward gives a policy nothing to climb. A fast che
 a reward design, without a training run.
 
 ``--fresh``: instead of a run's model, a new one (``--variant``, ``--adversarial-weight``
-as in training) is trained here for ``--updates`` batches on the built-in demonstration,
-the other built-in gaits as multi-task clips, and, as agent data, rollouts of the same
-controllers from other seeds (a diverse stand-in for a policy's rollouts); the alignment
-is then measured on the usual seeds.
+as in training, ``--set NAME=VALUE`` for any other distance-model setting) is trained here for
+``--updates`` batches on the built-in demonstration, the other built-in gaits as multi-task
+clips, and, as agent data, rollouts of the same controllers from other seeds (a diverse
+stand-in for a policy's rollouts) or, with ``--agent-policy``, of an exported policy (the
+narrow data a training run's distance model sees, arriving over the first half of the
+updates); the alignment is then measured on the usual seeds, every ``--probe-every`` updates
+with that option (the curve a training run would log, in minutes instead of a run):
+
+    python bench/reward_alignment.py --fresh --agent-policy policies/pupper_trot.pt \
+        --adversarial-weight 0.1 --updates 800 --probe-every 100 [--seed 1] \
+        [--set latent_norm=false --set view_zoom=0 --set view_shift=0]
 """
 
 from __future__ import annotations
@@ -38,25 +45,66 @@ from virl_quad.reward.reward import build_reward
 from virl_quad.training import checkpoint
 from virl_quad.training.alignment import alignment, controllers, record, rollout, table
 
-def fresh_model(a: argparse.Namespace):
-    """A distance model trained here (see the module doc); (model, demo, robot)."""
+def _settings(pairs: list[str]) -> dict:
+    """``NAME=VALUE`` strings -> {name: value} (int, float, true/false or text)."""
+    out = {}
+    for item in pairs:
+        name, _, text = item.partition("=")
+        value: object = {"true": True, "false": False}.get(text.lower(), text)
+        for conv in (int, float):
+            try:
+                value = conv(text)
+                break
+            except ValueError:
+                pass
+        out[name] = value
+    return out
+
+
+def _agent_data(a: argparse.Namespace, robot: str, demo, gait: str) -> list:
+    """(agent frames, expert frames) episodes: the controllers' (other seeds) or a policy's."""
+    if a.agent_policy is None:
+        return [rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)[:2]
+                for act in controllers(robot, float(demo.motion.duration), gait).values()
+                for seed in range(1000, 1000 + a.train_seeds)]
+    from virl_quad.policy_io import load_policy
+
+    policy = load_policy(a.agent_policy)
+    act = lambda env, rng, obs: policy.act(obs["policy"])          # noqa: E731
+    return [rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground,
+                    **policy.contract.env_overrides())[:2] for seed in range(1000, 1000 + a.agent_episodes)]
+
+
+def fresh_model(a: argparse.Namespace, probe=None):
+    """A distance model trained here (see the module doc); (model, demo, robot). ``probe(model,
+    updates)`` is called every ``--probe-every`` updates when given."""
     from virl_quad.motion.gaits import GAIT_NAMES
 
     robot, gait = a.robot, a.demo
     demo = demo_lib.load(gait, robot, ground=a.ground)
     clips = [demo_lib.load(g, robot, ground=a.ground).frames for g in GAIT_NAMES if g != gait]
     weights = {} if a.adversarial_weight == 1.0 else {"expert_vs_agent": a.adversarial_weight}
-    cfg = RewardConfig.make(variant=a.variant, clips_cyclic=demo.loop, pair_weights=weights)
-    rm = build_reward(cfg, demo.frames, clips, 0, "cpu")
-    for name, act in controllers(robot, float(demo.motion.duration), gait).items():
-        for seed in range(1000, 1000 + a.train_seeds):
-            agent, expert, _ = rollout(robot, demo, act, seed, a.episode_seconds, not a.no_randomize, a.ground)
-            rm.add_episode(agent, expert)
+    cfg = RewardConfig.make(**{"variant": a.variant, "clips_cyclic": demo.loop, "pair_weights": weights,
+                               **_settings(a.set)})
+    rm = build_reward(cfg, demo.frames, clips, a.seed, "cpu")
+    episodes = _agent_data(a, robot, demo, gait)
     print(f"training a fresh {a.variant} model on the {a.ground} ground: {a.updates} updates, adversarial "
-          f"weight {a.adversarial_weight:g}", file=sys.stderr, flush=True)
-    for k in range(0, a.updates, 100):
-        info = rm.update(min(100, a.updates - k))
-        print(f"  update {k + 100:5d}: loss {info.get('total', float('nan')):.4f}", file=sys.stderr, flush=True)
+          f"weight {a.adversarial_weight:g}, {len(episodes)} agent episodes", file=sys.stderr, flush=True)
+    step = a.probe_every or 100
+    added = 0
+    for k in range(0, a.updates, step):
+        if a.agent_policy is None:
+            want = len(episodes)                                  # the controllers' data all at once
+        else:                                                     # a run's data arrives as it trains
+            want = min(len(episodes), 1 + (k * len(episodes)) // max(1, a.updates // 2))
+        for agent, expert in episodes[added:want]:
+            rm.add_episode(agent, expert)
+        added = max(added, want)
+        info = rm.update(min(step, a.updates - k))
+        print(f"  update {min(k + step, a.updates):5d}: loss {info.get('total', float('nan')):.4f}",
+              file=sys.stderr, flush=True)
+        if probe is not None and a.probe_every:
+            probe(rm, min(k + step, a.updates))
     return rm, demo, robot
 
 
@@ -77,11 +125,30 @@ def main() -> int:
     p.add_argument("--updates", type=int, default=600, help="--fresh: batch updates")
     p.add_argument("--train-seeds", type=int, default=3, help="--fresh: training rollouts per controller")
     p.add_argument("--episode-seconds", type=float, default=6.0, help="--fresh: s per training rollout")
+    p.add_argument("--agent-policy", type=Path, help="--fresh: agent data from this exported policy's rollouts")
+    p.add_argument("--agent-episodes", type=int, default=16, help="--fresh --agent-policy: training rollouts")
+    p.add_argument("--probe-every", type=int, default=0, help="--fresh: rank correlation every N updates (0: at the end)")
+    p.add_argument("--seed", type=int, default=0, help="--fresh: the model's seed")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="--fresh: a distance-model setting (RewardConfig field), repeatable")
     a = p.parse_args()
     torch.set_num_threads(1)
     if a.fresh:
         a.ground = a.ground or DEFAULT_GROUND
-        rm, demo, robot = fresh_model(a)
+        probe = None
+        if a.probe_every:
+            fixed = record(a.robot, demo_lib.load(a.demo, a.robot, ground=a.ground), a.demo, tuple(range(a.seeds)),
+                           a.seconds, not a.no_randomize, a.ground)
+
+            def probe(model, updates: int) -> None:
+                rho, rewards = alignment(model, fixed)
+                by = {name: r for name, r, _ in table(fixed, rewards)}
+                print(f"after {updates:5d} updates: rank correlation {rho:+.2f}, reward of the tracker "
+                      f"{by['tracker, alpha 1']:.3f}, of standing still {by['standing still']:.3f}", flush=True)
+        try:
+            rm, demo, robot = fresh_model(a, probe)
+        except (TypeError, ValueError) as e:
+            raise SystemExit(f"error: {e}") from None
     elif a.run_dir is None:
         raise SystemExit("error: give a RUN_DIR or --fresh")
     else:
