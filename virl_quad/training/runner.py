@@ -28,7 +28,7 @@ from virl_quad.training import checkpoint
 from virl_quad.training.rollout import rollout
 
 #: below this spread of its encodings over the demonstration (units of e, in (0, 1)) the distance
-#: model's frame encoder counts as collapsed (trained healthy models: 0.04-0.1; collapsed ~1e-5)
+#: model's frame encoder counts as collapsed (trained healthy models: 0.04-0.3; collapsed ~1e-5)
 COLLAPSED_SPREAD = 0.005
 #: a spread this large once counts as having learned the frames (a later fall below
 #: COLLAPSED_SPREAD is then a collapse, not a model that never spread)
@@ -216,10 +216,10 @@ class VirlRunner(OnPolicyRunner):
             return
         self._collapse_warned = True
         what = (f"has collapsed (encoding spread over the demonstration {spread:.1e}, down from "
-                f"{self._peak_spread:.2f}; healthy 0.04-0.1): its reward no longer tells behaviours apart"
+                f"{self._peak_spread:.2f}; healthy 0.04-0.3): its reward no longer tells behaviours apart"
                 if self._peak_spread >= SPREAD_LEARNED else
                 f"still encodes the demonstration's frames alike after {it} iterations (spread {spread:.1e}, "
-                f"healthy 0.04-0.1): its reward tells behaviours apart poorly until they spread")
+                f"healthy 0.04-0.3): its reward tells behaviours apart poorly until they spread")
         log(f"warning: the distance model's frame encoder {what}")
 
     def _report(self, it: int, total: int, losses: dict, phases: tuple, start_wall: float, start_it: int,
