@@ -39,6 +39,7 @@ from pathlib import Path
 import torch
 
 from virl_quad import demo as demo_lib
+from virl_quad.cli import options
 from virl_quad.reward.config import RewardConfig
 from virl_quad.sim.params import DEFAULT_GROUND, GROUNDS
 from virl_quad.reward.reward import build_reward
@@ -58,6 +59,10 @@ def _settings(pairs: list[str]) -> dict:
             except ValueError:
                 pass
         out[name] = value
+    defaults = options(RewardConfig())
+    for name, value in out.items():      # a setting keeps its type (a bool stays a bool)
+        if name in defaults and isinstance(defaults[name], bool) and not isinstance(value, bool):
+            raise ValueError(f"--set {name}: true or false, got {value!r}")
     return out
 
 
