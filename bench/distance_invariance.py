@@ -68,11 +68,10 @@ def main() -> None:
         raise SystemExit("the run's demonstration has no reference motion to re-render")
     n, idx = a.steps, np.arange(a.steps) % demo.num_frames
     expert = demo.frames[idx]
-    w_d = rm.cfg.reward.w_d
 
     def row(name: str, agent: np.ndarray, ref: np.ndarray = expert) -> None:
-        d = rm.distance(torch.from_numpy(ref[:, None]), torch.from_numpy(agent[:, None]))[10:, 0].numpy()
-        print(f"{name:<44}{d.mean():8.3f}{np.exp(w_d * d ** 2).mean():10.4f}")
+        d = rm.distance(torch.from_numpy(ref[:, None]), torch.from_numpy(agent[:, None]))[10:, 0]
+        print(f"{name:<44}{float(d.mean()):8.3f}{float(rm.reward_of(d).mean()):10.4f}")
 
     def render(motion=None, cam=None) -> np.ndarray:
         return render_demonstration(motion or demo.motion, robot, cam=cam,

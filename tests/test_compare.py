@@ -12,6 +12,7 @@ import pytest
 #: tiny runs; the prior from the reference motion and no alignment probe (both tested on their own,
 #: tests/training/test_video_prior.py and test_alignment.py) keep each run to seconds
 TINY_TRAIN = ("--train-args=--num-envs 2 --steps-per-env 8 --num-workers 1 --iterations 2 --warm-start-rounds 1 "
+              "--reward-pretrain 2 "
               "--warm-start-steps 40 --critic-warmup 1 --eval-episodes 1 --eval-seconds 0.5 --eval-every 1 "
               "--prior-from motion --no-alignment-probe")
 

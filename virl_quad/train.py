@@ -326,9 +326,27 @@ def _attach_alignment_probe(args: TrainArgs, demo, runner, log) -> None:
         + (f" (the distance model's alone {first['distance_alignment']:+.2f})" if "distance_alignment" in first else ""))
 
 
+def _pretrain_distance(args: TrainArgs, runner, log) -> None:
+    """A new run with a learned reward: the distance model's first updates (``--reward-pretrain``),
+    on the demonstration's own pairs, the other clips and one rollout of the warm-started
+    policy, before the policy learns from its reward."""
+    model = getattr(runner.reward_source, "model", None)
+    if model is None or args.distance.reward_pretrain == 0:
+        return
+    t0 = time.time()
+    runner.pretrain_reward(args.distance.reward_pretrain)
+    runner.wall_time += time.time() - t0
+    note = ""
+    if runner.alignment_probe is not None:
+        note = f"; the reward's rank correlation with the score now {runner.alignment_probe.probe(model)['reward_alignment']:+.2f}"
+    log(f"distance model: {args.distance.reward_pretrain} updates on the demonstration, the other clips and one "
+        f"rollout of the policy before the policy trains ({time.time() - t0:.0f} s){note}")
+
+
 def _warm_start(args: TrainArgs, demo, runner, log) -> None:
-    """A new run: copy the trajectory generator's tracker into the actor (``--tg``), evaluate
-    it (the curve's first point), and fit the critic alone for the first iterations."""
+    """A new run: copy the trajectory generator's tracker into the actor (``--tg``), pretrain the
+    distance model on its rollout, evaluate it (the curve's first point), and fit the critic
+    alone for the first iterations."""
     from virl_quad import robots
     from virl_quad.training.warm_start import distill_into
 
@@ -348,11 +366,12 @@ def _warm_start(args: TrainArgs, demo, runner, log) -> None:
         runner.alg.anchor_actor(prior_pull(args))
         log(f"warm start: {time.time() - t0:.0f} s; the student alone fell in {student['falls']} of "
             f"{student['episodes']} episodes, mean travel {student['travel_m']:+.2f} m")
-        if demo.motion is not None:
-            from virl_quad.training.runner import eval_summary
+    _pretrain_distance(args, runner, log)
+    if tg is not None and args.prior.warm_start_rounds > 0 and demo.motion is not None:
+        from virl_quad.training.runner import eval_summary
 
-            runner.run_evaluation()
-            log(f"warm-started policy: {eval_summary(runner.last_eval, runner.standing)}")
+        runner.run_evaluation()
+        log(f"warm-started policy: {eval_summary(runner.last_eval, runner.standing)}")
     if args.ppo.critic_warmup > 0:
         runner.alg.freeze_actor(args.ppo.critic_warmup)
         log(f"the first {args.ppo.critic_warmup} iterations fit the critic alone (actor frozen)")

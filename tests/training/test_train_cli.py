@@ -17,7 +17,7 @@ import torch
 from virl_quad.policy_io import load_policy
 from virl_quad.training import checkpoint
 
-TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--eval-episodes", "1",
+TINY = ["--num-envs", "4", "--steps-per-env", "8", "--reward-updates", "1", "--reward-pretrain", "2", "--eval-episodes", "1",
         "--eval-seconds", "0.5", "--no-video", "--num-workers", "1", "--save-every", "1",
         "--warm-start-rounds", "1", "--warm-start-steps", "40", "--critic-warmup", "1", "--no-alignment-probe",
         "--prior-from", "motion"]   # the video fit (~20 s) and its physics check: the Laikago run and the --tg test
@@ -43,7 +43,8 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     assert p.returncode == 0, p.stderr[-2000:]
     assert "it     2/2" in p.stdout
     data = checkpoint.load(run_dir)
-    assert data["iteration"] == 2 and data["env_steps"] == 2 * 4 * 8
+    # two iterations and the rollout the distance model pretrains on, all counted
+    assert data["iteration"] == 2 and data["env_steps"] == (2 + 1) * 4 * 8
     assert data["config"]["ground"] == ("plain" if robot == "pupper" else "checker")
     net2 = data["reward"]["net"]
     report = json.loads((run_dir / "report.json").read_text())
@@ -55,6 +56,7 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     assert report["standing"]["total"] > 0 and "x standing, speed" in p.stdout, p.stdout[-2000:]
     # the video speed term needs a patterned ground: on with the checker, off with a line on plain
     assert ("video speed term off" in log) == (robot == "pupper")
+    assert "distance model: 2 updates on the demonstration, the other clips and one rollout" in log
     assert ("video speed term: 0.3 of the reward" in log) == (robot == "laikago")
     if robot == "laikago":   # the probe: at the start, at every evaluation (the curve) and in the report
         assert "alignment probe: 22 graded rollouts" in p.stdout, p.stdout[-2000:]
@@ -196,6 +198,7 @@ def test_kill_9_loses_at_most_one_checkpoint_interval(tmp_path: Path) -> None:
     (["--oracle-speed-weight", "nan"], "--oracle-speed-weight"),
     (["--video-speed-weight", "-0.1"], "--video-speed-weight"),
     (["--video-speed-weight", "nan"], "--video-speed-weight"),
+    (["--reward-pretrain", "-1"], "--reward-pretrain"),
 ])
 def test_bad_input_one_line_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
     p = run("virl_quad.train", *TINY, "--iterations", "1", "--run-dir", str(tmp_path / "r"), *args)   # args last: they win

@@ -168,8 +168,14 @@ class RewardModel:
         if state.num_envs != n or state.h.shape[-1] != self._lstm_units():
             raise ValueError(f"state is for {state.num_envs} envs of this variant, frames for {n}")
 
-    def _reward(self, d: torch.Tensor) -> torch.Tensor:
-        return torch.exp(self.cfg.reward.w_d * d.square()).clamp(min=self.cfg.reward.reward_floor, max=1.0)
+    def d2_scale(self) -> float:
+        """The unit d^2 is counted in before it becomes a reward (1: raw distances)."""
+        return 1.0
+
+    def reward_of(self, d: torch.Tensor) -> torch.Tensor:
+        """Rewards exp(w_d d^2 / :meth:`d2_scale`) of distances d (any shape), in [reward_floor, 1]."""
+        r = torch.exp(self.cfg.reward.w_d * d.square() / self.d2_scale())
+        return r.clamp(min=self.cfg.reward.reward_floor, max=1.0)
 
     def stream_step(self, agent, expert, state: StreamState, reset_mask=None
                     ) -> tuple[torch.Tensor, StreamState]:
@@ -189,7 +195,7 @@ class RewardModel:
             resets |= to_mask(reset_mask, "reset_mask", (n,), self.device)
         with eval_mode(self.reward_net):
             d, state = self._rollout(a[None], e[None], resets[None], state)
-        return self._reward(d[0]), state
+        return self.reward_of(d[0]), state
 
     def recompute(self, agent, expert, dones, start_state: StreamState, start_reset=None,
                   return_state: bool = False):
@@ -212,7 +218,7 @@ class RewardModel:
         resets = torch.cat([first[None], d_mask[:-1]], dim=0)
         with eval_mode(self.reward_net):
             d, state = self._rollout(a, e, resets, start_state)
-        r = self._reward(d)
+        r = self.reward_of(d)
         return (r, state) if return_state else r
 
     def distance(self, expert, agent) -> torch.Tensor:

@@ -122,6 +122,15 @@ class RewardShapeConfig:
 
     w_d: float = -5.0                 # paper: r = exp(w_d * d^2)
     reward_floor: float = 1e-8        # r is clamped to >= this so float underflow never gives 0
+    calibrate: bool = True            # d^2 counted in units of the model's own mean d^2 between the
+                                      # demonstration and its negatives (the other clips; without
+                                      # clips, the demonstration reversed), measured after every
+                                      # update: the contrastive margin pushes every non-positive
+                                      # pair ever further apart as training goes on, and exp(w_d d^2)
+                                      # of raw distances sinks to 0 for every agent behaviour while
+                                      # the model still ranks them; so calibrated, a behaviour as
+                                      # far from the demonstration as another gait gets exp(w_d)
+                                      # (project choice; not for gaifo)
 
 
 @dataclass
@@ -228,6 +237,7 @@ def without_retired(d: dict[str, Any]) -> dict[str, Any]:
     out.setdefault("paint_background", False)        # saved before backgrounds were painted
     out.setdefault("ema", 0.0)                       # saved before rewards came from a slow copy
     out.setdefault("latent_norm", False)             # saved before e was normalised
+    out.setdefault("calibrate", False)               # saved before d^2 was calibrated
     out.setdefault("view_zoom", 0.0)                 # saved before windows were seen through
     out.setdefault("view_shift", 0.0)                # a moved camera
     if isinstance(out.get("pair_weights"), dict):

@@ -18,6 +18,10 @@ from virl_quad.reward.model import DistanceModel
 from virl_quad.reward.sampler import PairSampler
 
 
+#: first frames of each sequence left out of the calibration (the sequence encoder warms up)
+CALIBRATION_SKIP = 10
+
+
 class VirlReward(RewardModel):
     """The VIRL distance (variants virl, frame, sequence, no_ae)."""
 
@@ -27,6 +31,7 @@ class VirlReward(RewardModel):
                  device: str | torch.device = "cpu") -> None:
         super().__init__(cfg, demo, clips, seed, device)
         self.sampler = PairSampler(self.cfg, self.demo, self.clips, self.dataset)
+        self._d2_ref: float | None = None      # see d2_scale
 
     def _build_net(self) -> nn.Module:
         return DistanceModel(self.cfg)
@@ -44,11 +49,36 @@ class VirlReward(RewardModel):
         return loss, logs
 
     def update(self, num_updates: int) -> dict[str, float]:
-        """As :meth:`RewardModel.update`, plus ``e_spread`` (see :meth:`encoding_spread`)."""
+        """As :meth:`RewardModel.update`, plus ``e_spread`` (see :meth:`encoding_spread`) and
+        ``d2_ref`` (see :meth:`d2_scale`)."""
         logs = super().update(num_updates)
         if logs:
             logs["e_spread"] = self.encoding_spread()
+            self._calibrate()
+            logs["d2_ref"] = self.d2_scale()
         return logs
+
+    def load_state_dict(self, d: dict) -> None:
+        """As :meth:`RewardModel.load_state_dict`; the calibration is measured again."""
+        super().load_state_dict(d)
+        if self.trainer.num_updates > 0:
+            self._calibrate()
+
+    def d2_scale(self) -> float:
+        """With ``calibrate``, once trained: the reward copy's mean d^2 (frames :data:`CALIBRATION_SKIP`
+        on, each from a fresh state) between the demonstration and each of its negatives (the
+        other clips, or the demonstration reversed), averaged; else 1."""
+        return self._d2_ref if self.cfg.reward.calibrate and self._d2_ref is not None else 1.0
+
+    def _calibrate(self) -> None:
+        negatives = self.clips or [self.demo[::-1]]
+        refs = []
+        for other in negatives:
+            n = min(len(self.demo), len(other))
+            d = self.distance(self.demo[:n, None], np.ascontiguousarray(other[:n, None]))[:, 0]
+            refs.append(float(d[min(CALIBRATION_SKIP, n - 1):].square().mean()))
+        ref = float(np.mean(refs))
+        self._d2_ref = ref if np.isfinite(ref) and ref > 1e-6 else None
 
     def encoding_spread(self) -> float:
         """Mean over latent units of the standard deviation, over the demonstration's frames, of

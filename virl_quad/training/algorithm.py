@@ -67,7 +67,8 @@ class VirlPPO(PPO):
         self.prior_pull = 0.0
 
     @contextlib.contextmanager
-    def _learning_threads(self) -> Iterator[None]:
+    def learning_threads(self) -> Iterator[None]:
+        """Within: torch runs on :attr:`learn_threads` CPU threads (the env workers wait)."""
         before = torch.get_num_threads()
         if self.learn_threads:
             torch.set_num_threads(self.learn_threads)
@@ -92,7 +93,7 @@ class VirlPPO(PPO):
     def compute_returns(self, obs: TensorDict) -> None:
         """Update the distance model, recompute this rollout's rewards, then GAE as usual."""
         st = self.storage
-        with self._learning_threads(), torch.inference_mode(False), torch.enable_grad():
+        with self.learning_threads(), torch.inference_mode(False), torch.enable_grad():
             new_rewards, info = self.reward_source.finish()
         new_rewards = new_rewards.to(self.device, torch.float32).reshape(st.rewards.shape)
         time_outs = torch.stack(self._time_outs).reshape(st.rewards.shape)
@@ -110,7 +111,7 @@ class VirlPPO(PPO):
 
     def update(self) -> dict[str, float]:
         """PPO's update, or the critic's alone while the actor is frozen (:meth:`freeze_actor`)."""
-        with self._learning_threads():
+        with self.learning_threads():
             return self._update()
 
     def anchor_actor(self, pull: float, weights: list[torch.Tensor] | None = None) -> None:

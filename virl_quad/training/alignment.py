@@ -98,14 +98,14 @@ def record(robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1)
 
 
 def rollout_rewards(model, rollouts: list[GradedRollout]) -> list[float]:
-    """Mean reward ``exp(w_d d^2)`` of each rollout under a distance model (frames SKIP.., or every
+    """Mean reward ``exp(w_d d^2)`` (d^2 calibrated as the model does) of each rollout under a distance model (frames SKIP.., or every
     frame of a rollout that ended, by a fall, before that)."""
     rewards = []
     with torch.no_grad():
         for r in rollouts:
             d = model.distance(torch.from_numpy(r.expert[:, None]), torch.from_numpy(r.agent[:, None]))[:, 0]
             d = d[SKIP:] if len(d) > SKIP else d
-            rewards.append(float(torch.exp(model.cfg.reward.w_d * d ** 2).mean()))
+            rewards.append(float(model.reward_of(d).mean()))
     return rewards
 
 

@@ -96,6 +96,9 @@ class DistanceOptions:
 
     reward_updates: int = opt(2,
         "distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)")
+    reward_pretrain: int = opt(200,
+        "distance-model batch updates on the demonstration's own pairs and the other clips before the "
+        "policy trains (a new run only): an untrained model rewards every behaviour about alike")
     reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
     reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
     adversarial_weight: float = opt(0.1,
@@ -204,6 +207,8 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"unknown --ground {args.env.ground!r}; choose one of: {', '.join(GROUNDS)}")
     if not 0 <= args.distance.video_speed_weight <= 1:
         raise ValueError(f"--video-speed-weight must lie in [0, 1], got {args.distance.video_speed_weight}")
+    if args.distance.reward_pretrain < 0:
+        raise ValueError(f"--reward-pretrain must be >= 0, got {args.distance.reward_pretrain}")
     if args.distance.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.distance.adversarial_weight}")
     if args.run.minutes < 0 or args.env.episode_seconds <= 0 or args.eval.eval_seconds <= 0:

@@ -68,18 +68,24 @@ class LearnedReward:
         self._expert.append(expert.cpu())
         self._dones.append(dones.bool().cpu())
 
+    def pretrain(self, updates: int) -> dict[str, float]:
+        """Dataset <- the steps observed so far (a rollout no policy learns from); ``updates``
+        model updates; no rewards. A new run's distance model so starts from the demonstration,
+        the other clips and the agent's own frames rather than from random weights."""
+        agent, expert, dones = self._take()
+        self.model.add_rollout(agent, expert, dones)
+        info = {f"distance/{k}": float(v) for k, v in self.model.update(updates).items()}
+        self._stream(agent, expert, dones)
+        return info
+
     def finish(self) -> tuple[torch.Tensor, dict[str, float]]:
         """Dataset <- rollout; M model updates; rewards [T, N] recomputed with the updated model."""
-        agent, expert, dones = torch.stack(self._agent), torch.stack(self._expert), torch.stack(self._dones)
-        self._agent, self._expert, self._dones = [], [], []
+        agent, expert, dones = self._take()
         t0 = time.perf_counter()
         self.model.add_rollout(agent, expert, dones)
         info = {f"distance/{k}": float(v) for k, v in self.model.update(self.updates).items()}
         t1 = time.perf_counter()
-        # The rollout starts from the state the last one ended in (computed with the previous
-        # weights); envs whose episode ended on the last step start fresh.
-        rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
-        self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
+        rewards = self._stream(agent, expert, dones)
         if self.speed is not None:
             if self._find_agent_ground:                  # once, from the first rollout's first env
                 self.speed.find_agent_ground(agent[:, 0])
@@ -93,6 +99,20 @@ class LearnedReward:
         info["time/distance_update_s"] = t1 - t0
         info["time/reward_recompute_s"] = time.perf_counter() - t1
         return rewards, info
+
+    def _take(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The observed agent and expert frames [T, N, 48, 48] and episode ends [T, N]; cleared."""
+        out = torch.stack(self._agent), torch.stack(self._expert), torch.stack(self._dones)
+        self._agent, self._expert, self._dones = [], [], []
+        return out
+
+    def _stream(self, agent: torch.Tensor, expert: torch.Tensor, dones: torch.Tensor) -> torch.Tensor:
+        """The rollout's rewards [T, N] under the present model. The rollout starts from the state
+        the last one ended in (computed with the previous weights); envs whose episode ended on
+        the last step start the next one fresh."""
+        rewards, end_state = self.model.recompute(agent, expert, dones, self.state, return_state=True)
+        self.state = end_state.with_reset(dones[-1].to(end_state.fresh.device))
+        return rewards
 
     def state_dict(self) -> dict:
         """Distance model and optimiser (weights-only loadable)."""

@@ -160,6 +160,27 @@ class VirlRunner(OnPolicyRunner):
             self.writer = None
         self.save_checkpoint()
 
+    def pretrain_reward(self, updates: int) -> dict[str, float]:
+        """One rollout of the present deterministic policy (``num_steps_per_env`` steps of every
+        env, counted in the env steps, stored nowhere for PPO), its frames given to the learned
+        reward, which then trains its model ``updates`` times: before the first PPO update its
+        reward has seen the demonstration, the other clips and what the agent looks like."""
+        policy = self.alg.get_policy()
+        obs = self.env.get_observations().to(self.device)
+        self.alg.eval_mode()
+        try:
+            with torch.inference_mode():
+                for _ in range(self.cfg["num_steps_per_env"]):
+                    obs, rewards, dones, extras = self.env.step(policy(obs).to(self.env.device))
+                    obs = obs.to(self.device)
+                    self.reward_source.observe(obs, rewards, dones, extras)
+                    self._count_episodes(dones)
+        finally:
+            self.alg.train_mode()
+        self.env_steps += self.cfg["num_steps_per_env"] * self.env.num_envs
+        with self.alg.learning_threads(), torch.inference_mode(False), torch.enable_grad():
+            return self.reward_source.pretrain(updates)
+
     def _rollout(self, obs: TensorDict) -> TensorDict:
         obs = rollout(self.alg, self.env, obs, self.cfg["num_steps_per_env"], self._count_episodes,
                       check_nans=self.cfg.get("check_for_nan", True))
