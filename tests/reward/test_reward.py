@@ -238,11 +238,42 @@ def test_the_encoding_spread_is_logged_and_reads_0_for_a_collapsed_encoder(small
     assert torch.all(rm.recompute(agent, expert, dones, rm.stream_state(dones.shape[1])) > 0.999)
 
 
+def test_d2_is_counted_in_units_of_the_demonstrations_distance_to_its_negatives(small_cfg, demo, other,
+                                                                             agent_episode):
+    """Calibrated, the reward is exp(w_d d^2 / d2_ref), d2_ref the mean d^2 (frames 10 on) between
+    the demonstration and the other clip, measured after every update: a behaviour as far from the
+    demonstration as another gait gets exp(w_d) however far training has pushed the negatives."""
+    rm = make("virl", small_cfg, demo, other, agent_episode)
+    logs = rm.update(1)
+
+    def ref(a: np.ndarray, b: np.ndarray, model=rm) -> float:
+        n = min(len(a), len(b))
+        d = model.distance(torch.from_numpy(a[:n, None]), torch.from_numpy(np.ascontiguousarray(b[:n, None])))
+        return float(d[10:, 0].square().mean())
+
+    assert rm.d2_scale() == pytest.approx(ref(demo, other), rel=1e-5) and logs["d2_ref"] == rm.d2_scale() != 1.0
+    d = torch.tensor([0.0, rm.d2_scale() ** 0.5])
+    assert torch.allclose(rm.reward_of(d), torch.tensor([1.0, float(np.exp(rm.cfg.reward.w_d))]), rtol=1e-4)
+    agent, expert, dones = rollout(1)
+    calibrated = rm.recompute(agent, expert, dones, rm.stream_state(5))
+    rm.cfg.reward.calibrate = False
+    raw = rm.recompute(agent, expert, dones, rm.stream_state(5))
+    floor = rm.cfg.reward.reward_floor
+    assert torch.allclose(calibrated, (raw ** (1.0 / ref(demo, other))).clamp(min=floor), rtol=1e-3)
+    # with no other clips the negative is the demonstration played backwards
+    alone = build_reward(RewardConfig.make(**small_cfg.to_dict()), demo, seed=3)
+    assert alone.d2_scale() == 1.0                 # untrained: raw distances
+    alone.update(2)
+    assert alone.d2_scale() == pytest.approx(ref(demo, demo[::-1], alone), rel=1e-5)
+
+
 def test_a_config_saved_before_the_latent_norm_and_view_jitter_loads_without_them(small_cfg, demo):
     """An older model's saved config lacks the settings added since: it loads as it was trained."""
-    old = {k: v for k, v in small_cfg.to_dict().items() if k not in ("latent_norm", "view_zoom", "view_shift")}
+    old = {k: v for k, v in small_cfg.to_dict().items()
+           if k not in ("latent_norm", "view_zoom", "view_shift", "calibrate")}
     cfg = RewardConfig.from_dict(old)
     assert not cfg.arch.latent_norm and cfg.pairs.view_zoom == 0.0 and cfg.pairs.view_shift == 0.0
+    assert not cfg.reward.calibrate
     assert isinstance(build_reward(cfg, demo).net.phi.norm, torch.nn.Identity)
     with pytest.raises(ValueError, match="view_zoom"):
         RewardConfig.make(view_zoom=0.6).validate()

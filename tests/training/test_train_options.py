@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
+from tensordict import TensorDict
 
 from virl_quad.train import _other_clips
 from virl_quad.training.config import TrainArgs, validate
@@ -34,6 +36,26 @@ def test_adversarial_weight_reaches_the_pair_sampler() -> None:
     assert LearnedReward("virl", frames, 2, 1, 0).model.cfg.pairs.pair_weights == {}
     with pytest.raises(ValueError, match="adversarial-weight"):
         validate(TrainArgs.make(adversarial_weight=-1.0))
+
+
+def test_pretraining_learns_from_the_observed_rollout_and_rewards_nothing() -> None:
+    """``pretrain``: the frames observed so far go to the dataset, the model updates that many
+    times, and the next rollout's rewards come from that rollout alone."""
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 255, (40, 48, 48), dtype=np.uint8)
+    source = LearnedReward("virl", frames, 2, 1, 0)
+    obs = TensorDict({"agent_image": torch.from_numpy(frames[:2]), "expert_image": torch.from_numpy(frames[2:4])},
+                     batch_size=[2])
+    extras = {"final_agent_image": obs["agent_image"], "final_expert_image": obs["expert_image"]}
+    for _ in range(12):
+        source.observe(obs, torch.zeros(2), torch.zeros(2), extras)
+    info = source.pretrain(3)
+    assert source.model.trainer.num_updates == 3 and "distance/d2_ref" in info
+    assert source.model.dataset.num_frames == 24
+    for _ in range(5):
+        source.observe(obs, torch.zeros(2), torch.zeros(2), extras)
+    rewards, _ = source.finish()
+    assert rewards.shape == (5, 2) and source.model.trainer.num_updates == 4
 
 
 def test_checkpoint_contract_is_the_runs_and_must_match_the_robot() -> None:
