@@ -98,8 +98,8 @@ def record(robot: str, demo, gait: str = "trot", seeds: tuple[int, ...] = (0, 1)
 
 
 def rollout_rewards(model, rollouts: list[GradedRollout]) -> list[float]:
-    """Mean reward ``exp(w_d d^2)`` (d^2 calibrated as the model does) of each rollout under a distance model (frames SKIP.., or every
-    frame of a rollout that ended, by a fall, before that)."""
+    """Mean reward ``exp(w_d d^2)`` (d^2 in the model's calibrated unit) of each rollout under a
+    distance model (frames SKIP.., or every frame of a rollout that ended, by a fall, before that)."""
     rewards = []
     with torch.no_grad():
         for r in rollouts:

@@ -97,8 +97,9 @@ class DistanceOptions:
     reward_updates: int = opt(2,
         "distance-model batch updates per iteration (M in Algorithm 1; <= 2 keeps reward cost <= 20 %)")
     reward_pretrain: int = opt(200,
-        "distance-model batch updates on the demonstration's own pairs and the other clips before the "
-        "policy trains (a new run only): an untrained model rewards every behaviour about alike")
+        "distance-model batch updates before the policy trains (a new run only), on the demonstration's "
+        "own pairs, the other clips and one rollout of the warm-started policy: an untrained model "
+        "rewards every behaviour about alike; 0: none")
     reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
     reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
     adversarial_weight: float = opt(0.1,

@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 import torch
 from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
 from virl_quad.envs.workers import EnvWorkerLost
@@ -172,6 +173,8 @@ class VirlRunner(OnPolicyRunner):
             with torch.inference_mode():
                 for _ in range(self.cfg["num_steps_per_env"]):
                     obs, rewards, dones, extras = self.env.step(policy(obs).to(self.env.device))
+                    if self.cfg.get("check_for_nan", True):
+                        check_nan(obs, rewards, dones)
                     obs = obs.to(self.device)
                     self.reward_source.observe(obs, rewards, dones, extras)
                     self._count_episodes(dones)
