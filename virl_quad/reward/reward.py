@@ -66,18 +66,16 @@ class VirlReward(RewardModel):
 
     def d2_scale(self) -> float:
         """With ``calibrate``, once trained: the reward copy's mean d^2 (frames :data:`CALIBRATION_SKIP`
-        on, each from a fresh state) between the demonstration and each of its negatives (the
-        other clips, or the demonstration reversed), averaged; else 1."""
+        on, each sequence from a fresh state) between the demonstration and its negatives (the
+        other clips, or the demonstration reversed), over their common length; else 1."""
         return self._d2_ref if self.cfg.reward.calibrate and self._d2_ref is not None else 1.0
 
     def _calibrate(self) -> None:
         negatives = self.clips or [self.demo[::-1]]
-        refs = []
-        for other in negatives:
-            n = min(len(self.demo), len(other))
-            d = self.distance(self.demo[:n, None], np.ascontiguousarray(other[:n, None]))[:, 0]
-            refs.append(float(d[min(CALIBRATION_SKIP, n - 1):].square().mean()))
-        ref = float(np.mean(refs))
+        n = min(len(self.demo), *(len(c) for c in negatives))
+        others = np.stack([c[:n] for c in negatives], axis=1)               # [n, K, 48, 48], one pass
+        expert = np.repeat(self.demo[:n, None], len(negatives), axis=1)
+        ref = float(self.distance(expert, others)[min(CALIBRATION_SKIP, n - 1):].square().mean())
         self._d2_ref = ref if np.isfinite(ref) and ref > 1e-6 else None
 
     def encoding_spread(self) -> float:
