@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 from torch.nn import functional as F
 
@@ -82,3 +83,34 @@ def test_latent_norm_spreads_the_frames_of_a_render():
                 spreads[norm] = float(phi(frames)[0].std(0).mean())
         assert spreads[False] < 0.01 and spreads[True] > 0.1, (seed, spreads)
     assert isinstance(DistanceModel(RewardConfig.make(latent_norm=False)).phi.norm, torch.nn.Identity)
+
+
+def test_the_latent_norm_does_not_depend_on_the_scale_of_its_input():
+    """Over a render's frames e's pre-activation varies by 1e-9 .. 1e-4 in trained models; shrunk
+    a hundredfold, the normalised encoding must not move (with torch's variance floor of 1e-5
+    it shrank towards one point, where the contrastive loss has no gradient left)."""
+    from virl_quad import demo as demo_lib
+
+    frames = torch.from_numpy(demo_lib.load("trot", "pupper").frames[:128]).float() / 255.0
+    spreads = {}
+    for eps in (1e-5, RewardConfig().arch.latent_norm_eps):
+        torch.manual_seed(0)
+        phi = DistanceModel(RewardConfig.make(latent_norm_eps=eps, dropout=0.0)).phi.train()
+        with torch.no_grad():
+            before = phi(frames)[0]
+            phi.mu.weight.mul_(1e-2)
+            phi.mu.bias.mul_(1e-2)
+            after = phi(frames)[0]
+        spreads[eps] = float(after.std(0).mean()) / float(before.std(0).mean())
+    assert spreads[RewardConfig().arch.latent_norm_eps] == pytest.approx(1.0, abs=1e-3), spreads
+    assert spreads[1e-5] < 0.5, spreads                     # the test can tell the two apart
+
+
+def test_dropout_drops_single_units_not_whole_feature_maps():
+    """Dropping one of conv1's 8 maps moves e more than any frame does; the encoder drops units."""
+    torch.manual_seed(0)
+    phi = DistanceModel(RewardConfig()).phi.train()
+    out = phi.drop(torch.ones(16, phi.conv1.out_channels, 22, 22))
+    dropped = out == 0
+    assert 0.05 < float(dropped.float().mean()) < 0.15
+    assert not dropped.all(dim=(-1, -2)).any()              # no map is dropped whole

@@ -270,8 +270,9 @@ def test_d2_is_counted_in_units_of_the_demonstrations_distance_to_its_negatives(
 def test_a_config_saved_before_the_latent_norm_and_view_jitter_loads_without_them(small_cfg, demo):
     """An older model's saved config lacks the settings added since: it loads as it was trained."""
     old = {k: v for k, v in small_cfg.to_dict().items()
-           if k not in ("latent_norm", "view_zoom", "view_shift", "calibrate")}
+           if k not in ("latent_norm", "latent_norm_eps", "view_zoom", "view_shift", "calibrate")}
     cfg = RewardConfig.from_dict(old)
+    assert cfg.arch.latent_norm_eps == 1e-5                 # torch's default, which it was saved with
     assert not cfg.arch.latent_norm and cfg.pairs.view_zoom == 0.0 and cfg.pairs.view_shift == 0.0
     assert not cfg.reward.calibrate
     assert isinstance(build_reward(cfg, demo).net.phi.norm, torch.nn.Identity)

@@ -40,13 +40,23 @@ class ArchitectureConfig:
     conv2_stride: int = 2
     dense_units: int = 256            # paper: dense 256
     frame_latent: int = 64            # paper: dense 64 (sigmoid) = e_t
-    dropout: float = 0.1              # probability of dropping a whole conv1 feature map
-                                      # (Dropout2d, between the conv layers; project choice)
+    dropout: float = 0.1              # probability of dropping a unit of phi's conv1 output (between
+                                      # the conv layers, paper; rate: project choice). Per unit, not
+                                      # whole feature maps: with 8 maps a dropped map can move the
+                                      # encoding more than any frame does, the batch-norm statistics
+                                      # then hold that spread, and clean frames (the reward's) all map
+                                      # alike. (GAIfO's discriminator, with no batch norm, drops maps)
     latent_norm: bool = True          # batch-normalise e's pre-activation before its sigmoid (project
                                       # choice): a fresh encoder maps the mostly-white frames almost
                                       # alike (spread of e ~1e-3) and can stay there, its sigmoid
                                       # saturated, every behaviour then rewarded 1; normalised, e
                                       # spreads from the first updates
+    latent_norm_eps: float = 1e-12    # the batch norm's variance floor: far below the frames' own
+                                      # variance of that pre-activation (1e-9 .. 1e-4), so the encoding
+                                      # never depends on its scale (torch's 1e-5 does at these
+                                      # spreads: shrinking every pre-activation then draws positive
+                                      # pairs together, and the encoder can sink to one point, where
+                                      # the contrastive loss has no gradient left)
     lstm_units: int = 128             # paper: LSTM 128 units
     seq_latent: int = 64              # paper: dense 64 = h_t
     decoder_lstm_units: int = 128     # decoder LSTM size (project choice: mirror of the encoder)
@@ -171,6 +181,8 @@ class RewardConfig(Sectioned):
             raise ValueError(f"unknown variant {self.variant!r}; choose one of: {', '.join(VARIANTS)}")
         if self.arch.image_size != 48:
             raise ValueError(f"image_size must be 48 (the paper's frame size), got {self.arch.image_size}")
+        if self.arch.latent_norm_eps <= 0:
+            raise ValueError(f"latent_norm_eps must be positive, got {self.arch.latent_norm_eps}")
         if not 0.0 <= self.arch.dropout < 1.0:
             raise ValueError(f"dropout must be in [0, 1), got {self.arch.dropout}")
         if not 0.0 <= self.pairs.view_zoom < 0.5 or self.pairs.view_shift < 0:
@@ -237,6 +249,7 @@ def without_retired(d: dict[str, Any]) -> dict[str, Any]:
     out.setdefault("paint_background", False)        # saved before backgrounds were painted
     out.setdefault("ema", 0.0)                       # saved before rewards came from a slow copy
     out.setdefault("latent_norm", False)             # saved before e was normalised
+    out.setdefault("latent_norm_eps", 1e-5)          # saved with torch's default variance floor
     out.setdefault("calibrate", False)               # saved before d^2 was calibrated
     out.setdefault("view_zoom", 0.0)                 # saved before windows were seen through
     out.setdefault("view_shift", 0.0)                # a moved camera

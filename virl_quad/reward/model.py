@@ -27,7 +27,9 @@ class FrameEncoder(nn.Module):
         a = cfg.arch
         self.size = a.image_size
         self.conv1 = nn.Conv2d(1, a.conv1_filters, a.conv1_kernel, a.conv1_stride)
-        self.drop = nn.Dropout2d(a.dropout)  # whole feature maps: far cheaper on CPU than per-unit
+        # per unit: dropping whole maps (Dropout2d, 1 of only 8) can become the encoder's main
+        # variation, and batch norm's running statistics then squeeze every clean frame together
+        self.drop = nn.Dropout(a.dropout)
         self.conv2 = nn.Conv2d(a.conv1_filters, a.conv2_filters, a.conv2_kernel, a.conv2_stride)
         n1 = conv_out(a.image_size, a.conv1_kernel, a.conv1_stride)
         n2 = conv_out(n1, a.conv2_kernel, a.conv2_stride)
@@ -35,7 +37,7 @@ class FrameEncoder(nn.Module):
         self.fc = nn.Linear(a.conv2_filters * n2 * n2, a.dense_units)
         self.mu = nn.Linear(a.dense_units, a.frame_latent)
         self.logvar = nn.Linear(a.dense_units, a.frame_latent)
-        self.norm = nn.BatchNorm1d(a.frame_latent) if a.latent_norm else nn.Identity()
+        self.norm = nn.BatchNorm1d(a.frame_latent, eps=a.latent_norm_eps) if a.latent_norm else nn.Identity()
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Frames [..., H, W] in [0, 1] -> (mu, logvar), each [..., frame_latent]; mu in (0, 1)."""
