@@ -88,7 +88,7 @@ def test_latent_norm_spreads_the_frames_of_a_render():
 def test_the_latent_norm_does_not_depend_on_the_scale_of_its_input():
     """Over a render's frames e's pre-activation varies by 1e-9 .. 1e-4 in trained models; shrunk
     a hundredfold, the normalised encoding must not move (with torch's variance floor of 1e-5
-    it shrank towards one point, where the contrastive loss has no gradient left)."""
+    it shrinks towards one point, where the contrastive loss has no gradient left)."""
     from virl_quad import demo as demo_lib
 
     frames = torch.from_numpy(demo_lib.load("trot", "pupper").frames[:128]).float() / 255.0
@@ -107,7 +107,7 @@ def test_the_latent_norm_does_not_depend_on_the_scale_of_its_input():
 
 
 def test_dropout_drops_single_units_not_whole_feature_maps():
-    """Dropping one of conv1's 8 maps moves e more than any frame does; the encoder drops units."""
+    """A dropped map, one of conv1's 8, can move e more than any frame does; the encoder drops units."""
     torch.manual_seed(0)
     phi = DistanceModel(RewardConfig()).phi.train()
     out = phi.drop(torch.ones(16, phi.conv1.out_channels, 22, 22))

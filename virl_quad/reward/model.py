@@ -27,9 +27,7 @@ class FrameEncoder(nn.Module):
         a = cfg.arch
         self.size = a.image_size
         self.conv1 = nn.Conv2d(1, a.conv1_filters, a.conv1_kernel, a.conv1_stride)
-        # per unit: dropping whole maps (Dropout2d, 1 of only 8) can become the encoder's main
-        # variation, and batch norm's running statistics then squeeze every clean frame together
-        self.drop = nn.Dropout(a.dropout)
+        self.drop = nn.Dropout(a.dropout)    # per unit, not whole maps: see ArchitectureConfig.dropout
         self.conv2 = nn.Conv2d(a.conv1_filters, a.conv2_filters, a.conv2_kernel, a.conv2_stride)
         n1 = conv_out(a.image_size, a.conv1_kernel, a.conv1_stride)
         n2 = conv_out(n1, a.conv2_kernel, a.conv2_stride)
