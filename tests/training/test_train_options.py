@@ -9,24 +9,24 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from virl_quad.train import _other_clips
+from virl_quad.training.setup import other_clips
 from virl_quad.training.config import TrainArgs, validate
 from virl_quad.training.rewards import LearnedReward
 
 
 def test_auto_uses_the_other_builtin_gaits_and_is_saved(tmp_path: Path) -> None:
-    clips = _other_clips(TrainArgs.make(demo="trot"), tmp_path)
+    clips = other_clips(TrainArgs.make(demo="trot"), tmp_path)
     assert len(clips) == 4 and all(c.ndim == 3 and c.shape[1:] == (48, 48) for c in clips)
     # a resume reads the saved clips, whatever the option now says
-    again = _other_clips(TrainArgs.make(demo="trot", other_demos="none"), tmp_path)
+    again = other_clips(TrainArgs.make(demo="trot", other_demos="none"), tmp_path)
     assert all(np.array_equal(a, b) for a, b in zip(clips, again)) and len(again) == 4
 
 
 def test_none_and_explicit_lists(tmp_path: Path) -> None:
-    assert _other_clips(TrainArgs.make(other_demos="none"), tmp_path / "a") == []
-    assert len(_other_clips(TrainArgs.make(other_demos="pace, bound"), tmp_path / "b")) == 2
+    assert other_clips(TrainArgs.make(other_demos="none"), tmp_path / "a") == []
+    assert len(other_clips(TrainArgs.make(other_demos="pace, bound"), tmp_path / "b")) == 2
     with pytest.raises(ValueError, match="cannot use"):
-        _other_clips(TrainArgs.make(other_demos="no_such_clip.xyz"), tmp_path / "c")
+        other_clips(TrainArgs.make(other_demos="no_such_clip.xyz"), tmp_path / "c")
 
 
 def test_adversarial_weight_reaches_the_pair_sampler() -> None:

@@ -19,7 +19,6 @@ ESTOP and ARM carry UTF-8 JSON objects. :func:`decode` raises
 from __future__ import annotations
 
 import json
-import math
 import struct
 import time
 import zlib
@@ -28,6 +27,8 @@ from enum import IntEnum
 from typing import Any, Union
 
 import numpy as np
+
+from virl_quad.deploy.strict_json import loads_strict
 
 MAGIC: bytes = b"VIRL"
 PROTOCOL_VERSION: int = 1
@@ -383,33 +384,9 @@ def _decode_command(p: bytes) -> JointCommand:
     return JointCommand(q_target=f[0:n], kp=f[n:2 * n], kd=f[2 * n:3 * n], tau_ff=f[3 * n:4 * n], ref_seq=ref_seq)
 
 
-def _reject_constant(name: str) -> None:
-    raise ValueError(f"non-finite JSON number {name}")
-
-
-def _finite_float(text: str) -> float:
-    """A JSON number as float; ValueError when it overflows to infinity (e.g. ``1e400``)."""
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"JSON number {text[:20]} is not a finite double")
-    return value
-
-
-def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object as dict; ValueError on a duplicated member name (which value wins is
-    ambiguous between parsers, so neither does)."""
-    seen: set[str] = set()
-    for name, _ in pairs:
-        if name in seen:
-            raise ValueError(f"duplicated member {name[:40]!r}")
-        seen.add(name)
-    return dict(pairs)
-
-
 def _decode_json(p: bytes) -> dict[str, Any]:
     try:
-        body = json.loads(p.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float,
-                          object_pairs_hook=_unique_object)
+        body = loads_strict(p.decode("utf-8"))
     except (UnicodeDecodeError, ValueError, RecursionError) as e:
         raise ProtocolError("bad_payload", f"JSON: {e}") from None
     if not isinstance(body, dict):
