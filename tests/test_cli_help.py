@@ -36,7 +36,7 @@ def test_train_help_lists_every_option_with_its_meaning_by_concern() -> None:
 
 
 def test_a_section_is_declared_by_its_type_and_each_instance_owns_its_own() -> None:
-    from virl_quad.envs.quadruped import EnvConfig
+    from virl_quad.envs.config import EnvConfig
     from virl_quad.reward.config import OptimConfig, RewardConfig
     from virl_quad.training.config import TrainArgs
 

@@ -86,6 +86,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           oracle_reward=oracle, oracle_speed_weight=args.run.oracle_speed_weight,
                           ground=args.env.ground,
                           render=args.run.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
+                          draw_as=setup.drawn_as(run_dir, args.run.robot),
                           **action_options)
     if oracle:
         source = EnvReward()

@@ -9,7 +9,8 @@ import gymnasium as gym
 
 from virl_quad import robots
 from virl_quad.cli import options
-from virl_quad.envs.quadruped import EnvConfig, QuadrupedEnv, policy_contract
+from virl_quad.envs.config import EnvConfig, policy_contract
+from virl_quad.envs.quadruped import QuadrupedEnv
 from virl_quad.robots.spec import RobotSpec
 
 #: Registered environment builders by name (one today; more tasks plug in here).

@@ -36,7 +36,7 @@ from tensordict import TensorDict
 
 from virl_quad import robots
 from virl_quad.envs import options_of
-from virl_quad.envs.quadruped import checked
+from virl_quad.envs.config import checked
 from virl_quad.envs.workers import EnvWorkerLost, InProcess, Processes
 from virl_quad.robots.spec import RobotSpec
 

@@ -30,6 +30,13 @@ from virl_quad.robots.spec import RobotSpec
 _TWO_PI = 2.0 * np.pi
 
 
+def leg_length(spec: RobotSpec) -> float:
+    """m: the robot's mean leg length, hip joint -> knee -> foot (ValueError without ``spec.leg``)."""
+    if spec.leg is None:
+        raise ValueError(f"robot {spec.name!r} has no leg geometry (RobotSpec.leg)")
+    return float(np.mean(spec.leg.upper_leg_length + spec.leg.lower_leg_length))
+
+
 class LegKinematics:
     """Foot positions from joint angles and back, for the four legs of one robot."""
 

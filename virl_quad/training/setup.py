@@ -139,3 +139,16 @@ def prior_from_video(args: TrainArgs, demo, spec, run_dir: Path):
                            title=f"video | fit: {tg.frequency:.2f} Hz, duty {tg.duty:.2f}")
     (run_dir / "prior_fit.json").write_text(json.dumps({"tg": tg.to_dict(), **report}, indent=2) + "\n")
     return tg, f"{describe(tg, report)}; video | fit: {sheet}"
+
+
+def drawn_as(run_dir: Path, robot: str) -> str | None:
+    """The robot whose body the agent's frames are drawn on: the body the gait prior's fit found
+    in the demonstration video (``prior_fit.json``) when that is another robot than ``robot``,
+    so that the distance model compares motions rather than bodies; None otherwise (no fit:
+    ``--no-tg`` or ``--prior-from reference``)."""
+    fit = run_dir / "prior_fit.json"
+    if not fit.exists():
+        return None
+    body = json.loads(fit.read_text()).get("body")
+    return body if body and body != robot else None
+

@@ -53,6 +53,7 @@ from typing import Callable
 import numpy as np
 import torch
 
+from virl_quad.policy.legs import leg_length
 from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.training.synthesis import RenderPool
@@ -157,11 +158,6 @@ def relative_offsets(offsets) -> tuple[float, ...]:
     """Leg offsets relative to leg FR (cycles in [0, 1)): the phase pattern without its global phase."""
     o = np.asarray(offsets, dtype=np.float64)
     return tuple(float(v) for v in np.mod(o - o[0], 1.0))
-
-
-def leg_length(spec: RobotSpec) -> float:
-    """m: the robot's mean leg length, hip joint -> knee -> foot."""
-    return float(np.mean(spec.leg.upper_leg_length + spec.leg.lower_leg_length))
 
 
 def transfer(params: TGParams, body: RobotSpec, spec: RobotSpec) -> TGParams:
