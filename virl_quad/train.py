@@ -157,6 +157,9 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
             f"{', with reference motion' if demo.motion is not None else ''}")
         if getattr(runner.reward_source, "speed_note", ""):
             log(runner.reward_source.speed_note)
+        if env.cfg.get("draw_as"):
+            log(f"the video shows a {env.cfg['draw_as']}: the agent's frames are drawn on its body, so the "
+                f"distance model compares motions rather than bodies")
         if not runner.standing and demo.motion is not None:
             from virl_quad.evaluate import zero_policy
 

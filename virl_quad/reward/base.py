@@ -33,7 +33,7 @@ from torch import nn
 
 from virl_quad.reward.config import RewardConfig, without_retired
 from virl_quad.reward.dataset import EpisodeStore
-from virl_quad.reward.frames import background_levels, paint, paint_float, to_float, to_mask, to_uint8
+from virl_quad.reward.frames import painted_levels, paint, paint_float, to_float, to_mask, to_uint8
 from virl_quad.reward.trainer import Trainer
 
 FORMAT = "virl_quad.reward/1"
@@ -85,7 +85,7 @@ class RewardModel:
                  device: str | torch.device = "cpu") -> None:
         self.cfg, self.seed, self.device = cfg, int(seed), torch.device(device)
         self._raw = (demo, clips)                    # as given: what a checkpoint saves
-        levels = background_levels(demo) if cfg.pairs.paint_background else np.zeros(0, np.int64)
+        levels = painted_levels(demo) if cfg.pairs.paint_background else np.zeros(0, np.int64)
         self._levels = levels                                    # gray levels painted white
         self._levels_t = torch.from_numpy(levels).to(self.device)
         self.demo, self.clips = paint(demo, levels), [paint(c, levels) for c in clips]   # what the model sees

@@ -100,7 +100,9 @@ class PairConfig:
                                       # background (the gray levels of its border rows: sky and
                                       # ground) painted white: the ground's scroll and pattern phase
                                       # differ whenever agent and demonstration stand at different
-                                      # places, and say nothing about the legs (project choice)
+                                      # places, and say nothing about the legs; on a textured ground
+                                      # every level from the ground's darkest up (frames.painted_levels)
+                                      # (project choice)
     clips_cyclic: bool = False        # the demonstration and other clips loop: windows cut from
                                       # them wrap around their end (else they must fit inside)
     view_zoom: float = 0.05           # every window of every pair is seen through its own camera

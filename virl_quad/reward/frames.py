@@ -140,6 +140,19 @@ def level_table(levels) -> np.ndarray:
     return table
 
 
+def painted_levels(demo: np.ndarray) -> np.ndarray:
+    """The gray levels the distance model paints white in every frame, from its demonstration
+    (T, H, W) uint8: the flat background's (:func:`background_levels`), or on a textured ground
+    (:func:`textured_ground`: a video resampled in time, a real scene) every level from the
+    ground's low end up, so that the darker subject alone is left: the agent's frames show the
+    env's own ground, and a ground drawn otherwise than the video's (sharper, another pattern)
+    would tell the two apart at a glance. int64 array, sorted."""
+    ground = textured_ground(demo)
+    if ground is None or ground[0] == 0:
+        return background_levels(demo)
+    return np.arange(ground[0], 256, dtype=np.int64)
+
+
 def paint(frames: np.ndarray, levels: np.ndarray) -> np.ndarray:
     """uint8 frames with every pixel at one of ``levels`` (:func:`background_levels`) set to white
     (:data:`PAINT`): the robot's silhouette, with its shading, on a blank background."""
