@@ -67,9 +67,10 @@ class QuadrupedEnv(gym.Env):
         self.robot, self.cfg = spec, cfg
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(spec.control_hz))}
-        self.world = World(spec, ground=ground_of(cfg), pd=cfg.physics.pd)
+        ground = ground_of(cfg)
+        self.world = World(spec, ground=ground, pd=cfg.physics.pd)
         body = drawn_body(spec, cfg)
-        self.shadow = Shadow(spec, body, ground_of(cfg)) if body is not None else None
+        self.shadow = Shadow(spec, body, ground) if body is not None else None
         ph = cfg.physics
         self.dr = DRConfig.from_overrides(ph.randomization,
                                           DRConfig.for_robot(spec) if ph.randomize else DRConfig.off())

@@ -143,14 +143,20 @@ def level_table(levels) -> np.ndarray:
 def painted_levels(demo: np.ndarray) -> np.ndarray:
     """The gray levels the distance model paints white in every frame, from its demonstration
     (T, H, W) uint8: the flat background's (:func:`background_levels`), or on a textured ground
-    (:func:`textured_ground`: a video resampled in time, a real scene) every level from the
+    (:func:`dark_level`: a video resampled in time, a real scene) every level from the
     ground's low end up, so that the darker subject alone is left: the agent's frames show the
     env's own ground, and a ground drawn otherwise than the video's (sharper, another pattern)
     would tell the two apart at a glance. int64 array, sorted."""
-    ground = textured_ground(demo)
-    if ground is None or ground[0] == 0:
-        return background_levels(demo)
-    return np.arange(ground[0], 256, dtype=np.int64)
+    level = dark_level(demo)
+    return background_levels(demo) if level is None else np.arange(level, 256, dtype=np.int64)
+
+
+def dark_level(video: np.ndarray) -> int | None:
+    """For a video (T, H, W) uint8 on a textured ground (:func:`textured_ground`), the gray level
+    below which a pixel is the subject: the low end of the ground's range. None for a flat
+    ground, or a textured one with nothing darker than it (the frames are then used as they are)."""
+    ground = textured_ground(video)
+    return ground[0] if ground is not None and ground[0] > 0 else None
 
 
 def paint(frames: np.ndarray, levels: np.ndarray) -> np.ndarray:

@@ -54,6 +54,7 @@ import numpy as np
 import torch
 
 from virl_quad.policy.legs import leg_length
+from virl_quad.reward.frames import dark_level
 from virl_quad.policy.tg import TGParams
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.training.synthesis import RenderPool
@@ -74,17 +75,6 @@ class VideoFitConfig:
     top_patterns: int = 4                                # patterns carried from the grid to the duty search
     finalists: int = 4                                   # best candidates: in the report; the physics check
                                                          # (virl_quad.training.prior_check) tries them in turn
-
-
-def dark_level(video: np.ndarray) -> int | None:
-    """For a video (T, H, W) uint8 on a textured ground
-    (:func:`virl_quad.reward.frames.textured_ground`), the gray level below which a pixel is the
-    subject: the low end of the ground's range. None for a flat ground, or a textured one with
-    nothing darker than it (the frames are then used as they are)."""
-    from virl_quad.reward.frames import textured_ground
-
-    ground = textured_ground(video)
-    return ground[0] if ground is not None and ground[0] > 0 else None
 
 
 def silhouettes(frames: np.ndarray, video: np.ndarray | None = None) -> np.ndarray:
