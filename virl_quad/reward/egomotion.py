@@ -27,7 +27,8 @@ import torch.nn.functional as F
 from virl_quad.reward.frames import BORDER_ROWS, flat_levels, level_table, textured_ground
 
 WINDOW_S = 0.16      # s between the two frames compared (8 steps at Pupper's 50 Hz)
-MAX_DX = 8           # px, largest horizontal shift searched (the checker's period is ~20 px)
+MAX_DX = 8           # px, largest horizontal shift searched (Pupper's camera sees the checker at ~25 px
+                     # a period; a camera that sees it smaller searches less: :func:`search_reach`)
 MAX_DY = 1           # px, vertical shifts searched too (the camera follows the base's bob)
 BLUR_SIGMA = 1.0     # px, Gaussian blur of the ground before matching
 MIN_PIXELS = 50      # ground pixels two frames must share for a shift to count
@@ -41,7 +42,7 @@ def window_steps(fps: float) -> int:
     return max(2, int(round(WINDOW_S * float(fps))))
 
 
-def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None) -> int:
+def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None, reach: int = MAX_DX) -> int:
     """Frames between the two frames compared for this clip: :func:`window_steps`, unless the
     ground slides so far in that many frames that its pattern aliases (a shift past half the
     checker's period reads as one the other way: a Laikago's trot at its camera's scale). The
@@ -55,7 +56,7 @@ def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None
         return full
 
     def per_frame(k: int) -> float:
-        s = ground_shift(frames[:-k], frames[k:], levels)
+        s = ground_shift(frames[:-k], frames[k:], levels, reach)
         s = s[torch.isfinite(s)]
         return float(s.mean()) / k if len(s) else float("nan")
 
@@ -81,6 +82,30 @@ def ground_levels(frames: np.ndarray) -> np.ndarray:
     return flat_levels(frames[:, -BORDER_ROWS:])
 
 
+def search_reach(frames: np.ndarray, levels: np.ndarray | None = None) -> int:
+    """Largest shift (px) worth searching in a video's ground: :data:`MAX_DX`, or less where the
+    camera sees the ground's pattern repeat sooner. A shift past half the pattern's period
+    matches as well as one the other way (a Laikago's camera, twice as far off, sees the checker
+    at ~10 px a period: its ground sliding 2.6 px forwards also reads 7 px backwards, and a
+    sharp render picks either). Half the period is where the ground, compared with itself moved
+    sideways by 1, 2, ... px, first differs most."""
+    frames = np.asarray(frames, dtype=np.uint8)
+    levels = ground_levels(frames) if levels is None else levels
+    if len(levels) == 0:
+        return MAX_DX
+    x = torch.as_tensor(frames, dtype=torch.int64)
+    f, m = _blur(x.to(torch.float32), torch.from_numpy(level_table(levels))[x.clamp(0, 255)])
+    diffs = []
+    for dx in range(1, MAX_DX + 2):
+        both = m[:, :, :-dx] & m[:, :, dx:]
+        d = (f[:, :, :-dx] - f[:, :, dx:]).square()
+        diffs.append(float((d * both).sum() / both.sum().clamp(min=1)))
+    for dx in range(2, MAX_DX + 1):                      # the first peak of the difference
+        if diffs[dx - 1] >= diffs[dx]:
+            return dx
+    return MAX_DX
+
+
 def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Masked Gaussian blur of [M, H, W]: the ground's gray levels smoothed over ground pixels
     only, and where that blur rests on ground alone."""
@@ -98,13 +123,14 @@ def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tens
     return conv(x * m) / weight.clamp(min=1e-6), weight > 0.95
 
 
-def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor) -> torch.Tensor:
-    """Mean squared difference [M, 2 MAX_DY + 1, 2 MAX_DX + 1] between ``fa`` and ``fb`` moved by
+def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor,
+                 reach: int = MAX_DX) -> torch.Tensor:
+    """Mean squared difference [M, 2 MAX_DY + 1, 2 reach + 1] between ``fa`` and ``fb`` moved by
     (dy, dx) over the pixels that are ground in both (inf where fewer than :data:`MIN_PIXELS`).
     Each of its sums over pixels is a cross-correlation, done at once for every shift by FFT:
     sum m_a m_b (a - b)^2 = corr(m_a a^2, m_b) + corr(m_a, m_b b^2) - 2 corr(m_a a, m_b b)."""
     h, w = fa.shape[1:]
-    size = (h + MAX_DY + 1, w + MAX_DX + 1)               # zero padding: no wrap within the shifts searched
+    size = (h + MAX_DY + 1, w + reach + 1)                # zero padding: no wrap within the shifts searched
     a0, b0 = ma.to(torch.float64), mb.to(torch.float64)
     a1, b1 = a0 * fa.to(torch.float64), b0 * fb.to(torch.float64)
     spec = {name: torch.fft.rfft2(x, s=size) for name, x in
@@ -113,7 +139,7 @@ def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch
     def corr(f: torch.Tensor) -> torch.Tensor:            # c[dy, dx] = sum_p A[p] B[p + (dy, dx)]
         c = torch.fft.irfft2(f, s=size)
         rows = torch.arange(-MAX_DY, MAX_DY + 1) % size[0]
-        cols = torch.arange(-MAX_DX, MAX_DX + 1) % size[1]
+        cols = torch.arange(-reach, reach + 1) % size[1]
         return c[:, rows][:, :, cols]
 
     count = corr(spec["a0"].conj() * spec["b0"]).round()
@@ -124,11 +150,14 @@ def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch
 
 
 def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.Tensor,
-                 levels: np.ndarray) -> torch.Tensor:
+                 levels: np.ndarray, reach: int = MAX_DX) -> torch.Tensor:
     """Horizontal shift (px, float32 [M]) of the ground from ``earlier`` to ``later`` frames
-    ([M, H, W] uint8, pairwise): positive when it slides right (the subject of a camera looking
-    from its right side moves left, backwards). NaN where the two frames share too little
-    ground or the ground shows no pattern."""
+    ([M, H, W] uint8, pairwise), searched within +-``reach`` px: positive when it slides right
+    (the subject of a camera looking from its right side moves left, backwards). NaN where the
+    two frames share too little ground or the ground shows no pattern."""
+    reach = int(reach)
+    if reach < 2:
+        raise ValueError(f"reach must be at least 2 px, got {reach}")
     a = torch.as_tensor(np.asarray(earlier), dtype=torch.int64)
     b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
     if a.shape != b.shape or a.ndim != 3:
@@ -137,15 +166,15 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     fa, ma = _blur(a.to(torch.float32), table[a.clamp(0, 255)])
     fb, mb = _blur(b.to(torch.float32), table[b.clamp(0, 255)])
     m_ = a.shape[0]
-    cost = _shift_costs(fa, ma, fb, mb)
+    cost = _shift_costs(fa, ma, fb, mb, reach)
     rows = torch.arange(m_)
     best = cost.reshape(m_, -1).argmin(1)
-    iy, ix = best // cost.shape[2], (best % cost.shape[2]).clamp(1, 2 * MAX_DX - 1)
+    iy, ix = best // cost.shape[2], (best % cost.shape[2]).clamp(1, 2 * reach - 1)
     line = cost[rows, iy]                                           # [M, X]: the best row's costs
     c0, c1, c2 = line[rows, ix - 1], line[rows, ix], line[rows, ix + 1]
     curv = c0 - 2 * c1 + c2
     sub = torch.where(torch.isfinite(curv) & (curv > 0), 0.5 * (c0 - c2) / curv, torch.zeros_like(c1))
-    shift = (ix - MAX_DX).to(torch.float32) + sub.clamp(-0.5, 0.5)
+    shift = (ix - reach).to(torch.float32) + sub.clamp(-0.5, 0.5)
     finite = line.masked_fill(~torch.isfinite(line), float("nan"))
     contrast = (torch.nanquantile(finite, 0.5, dim=1) - c1) / c1.clamp(min=1.0)
     ok = torch.isfinite(c1) & (contrast >= MIN_CONTRAST)
@@ -153,17 +182,17 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
 
 
 def clip_speed(frames: np.ndarray, fps: float, levels: np.ndarray | None = None,
-               window: int | None = None) -> float | None:
+               window: int | None = None, reach: int = MAX_DX) -> float | None:
     """The demonstration's mean ground shift (px per ``window`` frames, default
     :func:`clip_window`) over every pair of frames that far apart inside the clip (a looped
     clip's wrap is not crossed), or None when fewer than :data:`MIN_VALID` of them show a
     ground to measure."""
     frames = np.asarray(frames, dtype=np.uint8)
     levels = ground_levels(frames) if levels is None else levels
-    k = clip_window(frames, fps, levels) if window is None else int(window)
+    k = clip_window(frames, fps, levels, reach) if window is None else int(window)
     if len(frames) <= k or len(levels) == 0:
         return None
-    s = ground_shift(frames[:-k], frames[k:], levels)
+    s = ground_shift(frames[:-k], frames[k:], levels, reach)
     valid = torch.isfinite(s)
     if float(valid.float().mean()) < MIN_VALID:
         return None
@@ -182,14 +211,16 @@ class VideoSpeedTerm:
     """
 
     def __init__(self, target: float, fps: float, levels: np.ndarray, num_envs: int, window: int,
-                 agent_levels: np.ndarray | None = None) -> None:
+                 agent_levels: np.ndarray | None = None, reach: int = MAX_DX) -> None:
         """``levels``: the demonstration's ground levels (:func:`ground_levels`); ``agent_levels``: the
-        agent frames' (None: the same; set them later with :meth:`find_agent_ground`)."""
+        agent frames' (None: the same; set them later with :meth:`find_agent_ground`); ``reach``
+        (px): the shifts searched, the demonstration's :func:`search_reach`."""
         self.target, self.levels = float(target), np.asarray(levels, dtype=np.int64)
         self.agent_levels = self.levels if agent_levels is None else np.asarray(agent_levels, dtype=np.int64)
         self.sigma = max(abs(self.target), 1.0)                  # px per window
         self.fps = float(fps)
         self.k = int(window)                                     # frames: the window the target was measured over
+        self.reach = int(reach)                                  # px
         self.num_envs = int(num_envs)
         self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next
@@ -220,7 +251,8 @@ class VideoSpeedTerm:
         t_idx, n_idx = ends.nonzero(as_tuple=True)
         shifts = torch.full((steps, n), float("nan"))
         if len(t_idx):
-            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.agent_levels)
+            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.agent_levels,
+                                                      self.reach)
         given = torch.full((steps, n), float("nan"))
         held, has = self._held.clone(), self._has.clone()
         for t in range(steps):

@@ -124,7 +124,7 @@ def speed_rewards(term, rollouts: list[GradedRollout]) -> list[float]:
 
     out = []
     for r in rollouts:
-        fresh = VideoSpeedTerm(term.target, term.fps, term.levels, 1, term.k, term.agent_levels)
+        fresh = VideoSpeedTerm(term.target, term.fps, term.levels, 1, term.k, term.agent_levels, term.reach)
         reward, valid, _ = fresh.rollout(torch.from_numpy(r.agent[:, None]), torch.zeros(len(r.agent), 1, dtype=torch.bool))
         reward, valid = reward[SKIP:, 0], valid[SKIP:, 0]
         out.append(float(reward[valid].mean()) if bool(valid.any()) else float("nan"))
