@@ -116,3 +116,45 @@ def test_standing_or_going_backwards_earns_less(speed: float, low: float, high: 
     term = eg.VideoSpeedTerm(-4.0, 50.0, np.array([DARK, LIGHT]), 1, k)
     r, valid, _ = term.rollout(frames, torch.zeros(3 * k, 1, dtype=torch.bool))
     assert valid.any() and low <= float(r[valid].mean()) <= high  # exp(-1) in place; exp(-4) backwards
+
+
+def test_the_search_stops_at_half_the_patterns_period() -> None:
+    """Pupper's camera sees the checker at ~25 px a period: the full search. A ground that repeats
+    every 10 px is searched to 5 px, past which a shift reads as well the other way."""
+    from virl_quad import demo
+
+    assert eg.search_reach(_scene(np.arange(6), square=10)) == eg.MAX_DX
+    assert eg.search_reach(demo.load("trot", "pupper").frames) == eg.MAX_DX
+    assert eg.search_reach(_scene(np.arange(6), square=5)) == 5
+
+
+def _shadow_replay(travel: float, steps: int = 120) -> np.ndarray:
+    """Pupper's built-in trot, its travel x ``travel``, drawn on the Laikago (gray [T, 48, 48])."""
+    from virl_quad import demo, robots
+    from virl_quad.sim.shadow import Shadow
+
+    pupper = robots.get("pupper")
+    motion = demo.load("trot", "pupper").motion
+    shadow = Shadow(pupper, robots.get("laikago"), "checker")
+    frames = np.empty((steps, 48, 48), np.uint8)
+    try:
+        for i in range(steps):
+            pos, quat, q = motion.pose_at(i / 50.0)
+            pos = np.array(pos, dtype=np.float64)
+            pos[0] *= travel
+            frames[i] = shadow.render(pos, quat, pupper.clip_to_limits(q))
+    finally:
+        shadow.close()
+    return frames
+
+
+def test_a_laikago_cameras_slide_reads_in_proportion_to_its_travel() -> None:
+    """The Laikago's camera stands off 2.6x as far and sees the checker at ~10 px a period; its
+    sharp renders of a trot going ~3.3 px per 2 frames read, searched to 8 px, as often 6-7 px
+    the other way. Searched to half the period, half the travel reads half the slide."""
+    fast, slow = _shadow_replay(3.5), _shadow_replay(1.75)
+    levels, reach = eg.ground_levels(fast), eg.search_reach(fast)
+    assert reach < eg.MAX_DX
+    v_fast = eg.clip_speed(fast, 50.0, levels, window=2, reach=reach)
+    v_slow = eg.clip_speed(slow, 50.0, levels, window=2, reach=reach)
+    assert v_fast < -2.5 and v_slow / v_fast == pytest.approx(0.5, abs=0.07)
