@@ -128,23 +128,30 @@ def test_the_search_stops_at_half_the_patterns_period() -> None:
     assert eg.search_reach(_scene(np.arange(6), square=5)) == 5
 
 
-def _shadow_replay(travel: float, steps: int = 120) -> np.ndarray:
-    """Pupper's built-in trot, its travel x ``travel``, drawn on the Laikago (gray [T, 48, 48])."""
+def _replay(travel: float, draw_as: str | None = "laikago", steps: int = 120) -> np.ndarray:
+    """Pupper's built-in trot, its travel x ``travel``, drawn on ``draw_as``'s body (None: Pupper's
+    own), gray [T, 48, 48]."""
     from virl_quad import demo, robots
     from virl_quad.sim.shadow import Shadow
+    from virl_quad.sim.world import World
 
     pupper = robots.get("pupper")
     motion = demo.load("trot", "pupper").motion
-    shadow = Shadow(pupper, robots.get("laikago"), "checker")
+    shadow = Shadow(pupper, robots.get(draw_as), "checker") if draw_as else None
+    world = None if shadow else World(pupper, ground="checker")
     frames = np.empty((steps, 48, 48), np.uint8)
     try:
         for i in range(steps):
             pos, quat, q = motion.pose_at(i / 50.0)
             pos = np.array(pos, dtype=np.float64)
             pos[0] *= travel
-            frames[i] = shadow.render(pos, quat, pupper.clip_to_limits(q))
+            if shadow:
+                frames[i] = shadow.render(pos, quat, pupper.clip_to_limits(q))
+            else:
+                world.set_pose(pos, quat, pupper.clip_to_limits(q))
+                frames[i] = world.render()
     finally:
-        shadow.close()
+        (shadow or world).close()
     return frames
 
 
@@ -152,9 +159,22 @@ def test_a_laikago_cameras_slide_reads_in_proportion_to_its_travel() -> None:
     """The Laikago's camera stands off 2.6x as far and sees the checker at ~10 px a period; its
     sharp renders of a trot going ~3.3 px per 2 frames read, searched to 8 px, as often 6-7 px
     the other way. Searched to half the period, half the travel reads half the slide."""
-    fast, slow = _shadow_replay(3.5), _shadow_replay(1.75)
+    fast, slow = _replay(3.5), _replay(1.75)
     levels, reach = eg.ground_levels(fast), eg.search_reach(fast)
     assert reach < eg.MAX_DX
     v_fast = eg.clip_speed(fast, 50.0, levels, window=2, reach=reach)
     v_slow = eg.clip_speed(slow, 50.0, levels, window=2, reach=reach)
     assert v_fast < -2.5 and v_slow / v_fast == pytest.approx(0.5, abs=0.07)
+
+
+def test_a_fast_clips_window_keeps_its_slide_within_the_search() -> None:
+    """Pupper's trot at 2.6x its travel slides ~9.6 px in the default 8 frames, past the 8 px
+    searched: read there, it stops growing. The window shrinks until an agent 1.5x as fast
+    still fits, and half the travel reads half the slide."""
+    fast, slow = _replay(2.6, None), _replay(1.3, None)
+    levels = eg.ground_levels(fast)
+    k = eg.clip_window(fast, 50.0, levels)
+    assert k < eg.window_steps(50.0)
+    v_fast = eg.clip_speed(fast, 50.0, levels, window=k)
+    assert eg.HEADROOM * abs(v_fast) <= eg.MAX_DX - 0.5
+    assert eg.clip_speed(slow, 50.0, levels, window=k) / v_fast == pytest.approx(0.5, abs=0.07)

@@ -35,6 +35,7 @@ MIN_PIXELS = 50      # ground pixels two frames must share for a shift to count
 MIN_VALID = 0.5      # share of a clip's frame pairs that must give a shift for a clip speed
 MIN_CONTRAST = 0.2   # relative rise of the cost away from its best shift: below, no pattern to see
 MIN_SLIDE = 0.1      # px per frame, a clip's slide under which its window cannot alias
+HEADROOM = 1.5       # an agent this many times as fast as the demonstration still reads within the search
 
 
 def window_steps(fps: float) -> int:
@@ -48,7 +49,10 @@ def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None
     checker's period reads as one the other way: a Laikago's trot at its camera's scale). The
     clip's mean shift is measured over 1, 2, ... frames; at the first span whose shift per frame
     turns against, or strays by over half from, the 1-frame figure, half that span is kept, so
-    that an agent up to twice as fast stays unaliased too."""
+    that an agent up to twice as fast stays unaliased too. Nor is a window kept over which an
+    agent :data:`HEADROOM` times as fast as the clip would slide past the shifts searched
+    (``reach``, less the half pixel the sub-pixel step needs): its reading would stop growing
+    there, and the clip's own would read short."""
     frames = np.asarray(frames, dtype=np.uint8)
     full = window_steps(fps)
     levels = ground_levels(frames) if levels is None else levels
@@ -67,6 +71,8 @@ def clip_window(frames: np.ndarray, fps: float, levels: np.ndarray | None = None
         v = per_frame(k)
         if not np.isfinite(v) or v * one <= 0 or abs(v - one) > 0.5 * abs(one):
             return max(1, k // 2)
+        if HEADROOM * abs(v) * k > reach - 0.5:
+            return k - 1
     return full
 
 
