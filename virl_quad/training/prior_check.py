@@ -192,9 +192,9 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
     ground's slide in the demonstration, or too slowly (a video with no patterned ground:
     unchanged). Adds
     ``travel_check`` (rows) and ``variant`` (the kept one, or None) to ``report``."""
-    from virl_quad.reward.egomotion import clip_speed
+    from virl_quad.reward.egomotion import clip_speed, search_reach
 
-    slide = clip_speed(demo.frames, demo.fps)           # px per window: < 0 where the subject goes forwards
+    slide = clip_speed(demo.frames, demo.fps, reach=search_reach(demo.frames))   # px per window: < 0 forwards
     trial = next((r for r in reversed(report.get("physics_check", []))       # a slowed finalist's row is last
                   if r["finalist"] == report["kept_finalist"]), None)
     report["variant"] = None
