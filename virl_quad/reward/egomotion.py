@@ -120,9 +120,13 @@ def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tens
     g = torch.exp(-t.square() / (2 * BLUR_SIGMA ** 2))
     g = g / g.sum()
 
-    def conv(z: torch.Tensor) -> torch.Tensor:
-        z = F.conv2d(F.pad(z[:, None], (r, r, 0, 0), mode="replicate"), g.view(1, 1, 1, -1))
-        return F.conv2d(F.pad(z, (0, 0, r, r), mode="replicate"), g.view(1, 1, -1, 1))[:, 0]
+    taps = [float(v) for v in g]
+
+    def conv(z: torch.Tensor) -> torch.Tensor:        # separable, as sums of shifted copies: a 7-tap
+        h, w = z.shape[1:]                              # conv2d on 48 px frames is 4x slower on a CPU
+        padded = F.pad(z[:, None], (r, r, r, r), mode="replicate")[:, 0]
+        rows = sum(c * padded[:, :, j:j + w] for j, c in enumerate(taps))
+        return sum(c * rows[:, j:j + h, :] for j, c in enumerate(taps))
 
     m = mask.to(torch.float32)
     weight = conv(m)
