@@ -77,7 +77,7 @@ def main() -> None:
         return render_demonstration(motion or demo.motion, robot, cam=cam,
                                     ground=demo.camera.get("ground", DEFAULT_GROUND)).frames[idx]
 
-    print(f"run {a.run_dir}: {robot}, {demo.source}, w_d {w_d:g}; mean over frames 10..{n - 1}")
+    print(f"run {a.run_dir}: {robot}, {demo.source}, w_d {rm.cfg.reward.w_d:g}; mean over frames 10..{n - 1}")
     print(f"{'demonstration vs':<44}{'d':>8}{'reward':>10}")
     row("itself", expert)
     for frac in (0.25, 0.5, 1.0, 2.0):
