@@ -91,7 +91,7 @@ def ground_levels(frames: np.ndarray) -> np.ndarray:
 def search_reach(frames: np.ndarray, levels: np.ndarray | None = None) -> int:
     """Largest shift (px) worth searching in a video's ground: :data:`MAX_DX`, or less where the
     camera sees the ground's pattern repeat sooner. A shift past half the pattern's period
-    matches as well as one the other way (a Laikago's camera, twice as far off, sees the checker
+    matches as well as one the other way (a Laikago's camera, 2.6x as far off, sees the checker
     at ~10 px a period: its ground sliding 2.6 px forwards also reads 7 px backwards, and a
     sharp render picks either). Half the period is where the ground, compared with itself moved
     sideways by 1, 2, ... px, first differs most."""
