@@ -55,16 +55,13 @@ def replay(reference, scale: float, draw_as: str | None) -> np.ndarray:
 
 def reading(video, frames: np.ndarray, reach: int) -> tuple[float, float, float]:
     """The term's mean reading / the video's slide, its spread (same unit) and its mean reward."""
-    levels = eg.ground_levels(video.frames)
-    window = eg.clip_window(video.frames, video.fps, levels, reach)
-    target = eg.clip_speed(video.frames, video.fps, levels, window, reach)
-    if target is None:
+    term = eg.VideoSpeedTerm.for_demo(video.frames, video.fps, 1, reach)
+    if term is None:
         raise SystemExit("error: the video shows no patterned ground to measure its travel by")
-    term = eg.VideoSpeedTerm(target, video.fps, levels, 1, window, reach=reach)
     term.find_agent_ground(frames)
     r, valid, given = term.rollout(torch.from_numpy(frames[:, None]), torch.zeros(len(frames), 1, dtype=torch.bool))
     g = given[valid]
-    return float(g.mean()) / target, float(g.std()) / abs(target), float(r[valid].mean())
+    return float(g.mean()) / term.target, float(g.std()) / abs(term.target), float(r[valid].mean())
 
 
 def main() -> None:

@@ -237,6 +237,18 @@ class VideoSpeedTerm:
         self._held = torch.zeros(self.num_envs)                  # px, the latest block's shift
         self._has = torch.zeros(self.num_envs, dtype=torch.bool)
 
+    @classmethod
+    def for_demo(cls, frames: np.ndarray, fps: float, num_envs: int,
+                 reach: int | None = None) -> "VideoSpeedTerm | None":
+        """The term for a demonstration's frames (T, H, W) uint8 at ``fps``: its ground levels, its
+        :func:`search_reach` (or ``reach`` px), its :func:`clip_window` and its :func:`clip_speed`
+        as the target; None when it shows no patterned ground to measure."""
+        levels = ground_levels(frames)
+        reach = search_reach(frames, levels) if reach is None else int(reach)
+        window = clip_window(frames, fps, levels, reach)
+        target = clip_speed(frames, fps, levels, window, reach)
+        return None if target is None else cls(target, fps, levels, num_envs, window, reach=reach)
+
     def find_agent_ground(self, agent: np.ndarray | torch.Tensor) -> np.ndarray:
         """Take the agent's ground levels from its own frames [T, H, W] uint8 (a demonstration whose
         ground looks unlike the env's: a video resampled to the control rate); returns them."""

@@ -24,7 +24,7 @@ import torch
 from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
-from virl_quad.reward.egomotion import VideoSpeedTerm, clip_speed, clip_window, ground_levels, search_reach
+from virl_quad.reward.egomotion import VideoSpeedTerm
 from virl_quad.reward.frames import textured_ground
 
 
@@ -125,16 +125,12 @@ class LearnedReward:
 
 def _speed_term(demo_frames: np.ndarray, fps: float, num_envs: int, weight: float) -> tuple[VideoSpeedTerm | None, str]:
     """The video speed term for a demonstration, or None, with a line saying which and why."""
-    levels = ground_levels(demo_frames)
-    reach = search_reach(demo_frames, levels)
-    window = clip_window(demo_frames, fps, levels, reach)
-    target = clip_speed(demo_frames, fps, levels, window, reach)
-    if target is None:
+    term = VideoSpeedTerm.for_demo(demo_frames, fps, num_envs)
+    if term is None:
         return None, ("video speed term off: the demonstration shows no patterned ground to measure its "
                       "travel by (render it on the checker ground)")
-    term = VideoSpeedTerm(target, fps, levels, num_envs, window, reach=reach)
-    return term, (f"video speed term: {weight:g} of the reward for the ground's slide, {target:+.2f} px per "
-                  f"{term.k} frames in the demonstration (negative: forwards), shifts searched to +-{reach} px")
+    return term, (f"video speed term: {weight:g} of the reward for the ground's slide, {term.target:+.2f} px per "
+                  f"{term.k} frames in the demonstration (negative: forwards), shifts searched to +-{term.reach} px")
 
 
 class EnvReward:

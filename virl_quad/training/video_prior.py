@@ -54,8 +54,8 @@ import numpy as np
 import torch
 
 from virl_quad.policy.legs import leg_length
-from virl_quad.reward.frames import dark_level
 from virl_quad.policy.tg import TGParams
+from virl_quad.reward.frames import dark_level
 from virl_quad.robots.spec import RobotSpec
 from virl_quad.training.synthesis import RenderPool
 
