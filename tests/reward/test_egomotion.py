@@ -109,6 +109,16 @@ def test_the_term_pays_the_demonstration_speed_and_carries_over_rollouts() -> No
     assert torch.allclose(torch.cat([p[0] for p in parts]), r)
 
 
+def test_each_block_reads_the_shift_of_its_own_two_frames() -> None:
+    k, steps = 4, 25
+    frames = torch.from_numpy(_rollout(steps, 2, -0.6))
+    term = eg.VideoSpeedTerm(-2.4, 50.0, np.array([DARK, LIGHT]), 2, k)
+    _, _, given = term.rollout(frames, torch.zeros(steps, 2, dtype=torch.bool))
+    for t in range(k, steps, k):                                  # blocks end at steps k, 2k, ...: each frame
+        alone = eg.ground_shift(frames[t - k], frames[t], term.agent_levels)   # blurred once for two blocks
+        assert torch.isfinite(alone).all() and torch.allclose(given[t], alone), t
+
+
 @pytest.mark.parametrize("speed, low, high", [(0.0, 0.3, 0.45), (4.0, 0.0, 0.02)])
 def test_standing_or_going_backwards_earns_less(speed: float, low: float, high: float) -> None:
     k = eg.window_steps(50.0)

@@ -99,8 +99,7 @@ def search_reach(frames: np.ndarray, levels: np.ndarray | None = None) -> int:
     levels = ground_levels(frames) if levels is None else levels
     if len(levels) == 0:
         return MAX_DX
-    x = torch.as_tensor(frames, dtype=torch.int64)
-    f, m = _blur(x.to(torch.float32), torch.from_numpy(level_table(levels))[x.clamp(0, 255)])
+    f, m = ground_fields(frames, levels)
     diffs = []
     for dx in range(1, MAX_DX + 2):
         both = m[:, :, :-dx] & m[:, :, dx:]
@@ -172,10 +171,23 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
     if a.shape != b.shape or a.ndim != 3:
         raise ValueError(f"expected two [M, H, W] frame stacks of one shape, got {list(a.shape)}, {list(b.shape)}")
+    fa, ma = ground_fields(a, levels)
+    fb, mb = ground_fields(b, levels)
+    return _best_shift(fa, ma, fb, mb, reach)
+
+
+def ground_fields(frames: np.ndarray | torch.Tensor, levels: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    """What :func:`ground_shift` compares of frames [M, H, W] uint8: the ground's gray levels
+    blurred over ground pixels ([M, H, W] float32) and where that blur rests on ground alone
+    ([M, H, W] bool)."""
+    x = torch.as_tensor(np.asarray(frames), dtype=torch.int64)
     table = torch.from_numpy(level_table(levels))                  # ground levels: True
-    fa, ma = _blur(a.to(torch.float32), table[a.clamp(0, 255)])
-    fb, mb = _blur(b.to(torch.float32), table[b.clamp(0, 255)])
-    m_ = a.shape[0]
+    return _blur(x.to(torch.float32), table[x.clamp(0, 255)])
+
+
+def _best_shift(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor, reach: int) -> torch.Tensor:
+    """:func:`ground_shift` of two stacks of :func:`ground_fields`."""
+    m_ = fa.shape[0]
     cost = _shift_costs(fa, ma, fb, mb, reach)
     rows = torch.arange(m_)
     best = cost.reshape(m_, -1).argmin(1)
@@ -272,9 +284,12 @@ class VideoSpeedTerm:
             age = torch.where(dones[t], torch.zeros_like(age), age + 1)
         t_idx, n_idx = ends.nonzero(as_tuple=True)
         shifts = torch.full((steps, n), float("nan"))
-        if len(t_idx):
-            shifts[t_idx, n_idx] = ground_shift(frames[t_idx, n_idx], frames[t_idx + self.k, n_idx], self.agent_levels,
-                                                      self.reach)
+        if len(t_idx):                                           # a frame ending one block starts the next:
+            ids = torch.cat([t_idx, t_idx + self.k]) * n + torch.cat([n_idx, n_idx])   # blur each frame once
+            unique, inverse = torch.unique(ids, return_inverse=True)
+            f, m = ground_fields(frames.reshape(-1, *frames.shape[2:])[unique], self.agent_levels)
+            a, b = inverse[:len(t_idx)], inverse[len(t_idx):]
+            shifts[t_idx, n_idx] = _best_shift(f[a], m[a], f[b], m[b], self.reach)
         given = torch.full((steps, n), float("nan"))
         held, has = self._held.clone(), self._has.clone()
         for t in range(steps):
