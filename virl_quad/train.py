@@ -87,7 +87,7 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           ground=args.env.ground,
                           render=args.run.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed
                           draw_as=setup.drawn_as(run_dir, args.run.robot),
-                          start_speed=setup.start_speed(run_dir, demo), **action_options)
+                          **action_options)
     if oracle:
         source = EnvReward()
     elif args.run.reward == "prior":

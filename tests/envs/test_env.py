@@ -210,29 +210,3 @@ def test_oracle_reward_is_the_score_against_the_reference_at_each_step() -> None
                 break
     assert checked > 60 and env.demo_step > demo.num_frames // 2
     env.close()
-
-
-def test_a_video_demonstration_starts_mid_gait_at_up_to_start_speed() -> None:
-    import dataclasses
-
-    from virl_quad import demo as demo_lib
-    from virl_quad.motion.gaits import gait_params
-    from virl_quad.training.prior import gait_tg
-
-    spec = robots.get("pupper")
-    video = dataclasses.replace(demo_lib.load("trot", "pupper"), motion=None)     # frames alone
-    tg = gait_tg(spec, gait_params("pupper", "trot"))
-    env = make("pupper", demo=video, tg=tg, start_speed=0.3, randomize=False)
-    speeds = []
-    for seed in range(6):
-        env.reset(seed=seed)
-        s = env.world.state()
-        phase = env.actions.phase
-        assert s.q == pytest.approx(spec.clip_to_limits(env.actions.tg.joint_targets(phase)), abs=1e-6)
-        speeds.append(float(s.base_lin_vel[0]))                                  # m/s, forwards
-    assert all(0.0 <= v <= 0.3 for v in speeds) and max(speeds) - min(speeds) > 0.05, speeds
-    env.close()
-    still = make("pupper", demo=video, tg=tg, randomize=False)                    # start_speed 0: at rest
-    still.reset(seed=0)
-    assert still.world.state().q == pytest.approx(spec.default_pose) and np.allclose(still.world.state().base_lin_vel, 0)
-    still.close()

@@ -29,9 +29,6 @@ class EpisodeConfig:
     time_limit: bool = True                # truncate at episode_seconds (the VecEnv does it itself)
     terminate_on_fall: bool = True         # end the episode when the robot falls
     rsi: bool = True                       # reference state initialisation when the demo has a motion
-    start_speed: float = 0.0               # m/s; > 0 with a TG and a demo without a motion (a video): each
-                                           # episode starts mid-gait, in the TG's pose at the clock's phase,
-                                           # moving forwards at a speed drawn from [0, start_speed]
 
 
 @dataclass

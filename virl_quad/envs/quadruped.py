@@ -135,9 +135,6 @@ class QuadrupedEnv(gym.Env):
 
     def _place_robot(self) -> None:
         motion = self.demo.motion if self.demo is not None else None
-        if motion is None and self.demo is not None and self.cfg.episode.start_speed > 0 and self.actions.tg is not None:
-            self._place_mid_gait()
-            return
         if motion is None or not self.cfg.episode.rsi:
             self.world.reset()
             return
@@ -145,18 +142,6 @@ class QuadrupedEnv(gym.Env):
         q = self.robot.clip_to_limits(ref.q)
         self.world.reset(q=q, base_pos=ref.root_pos, base_quat=ref.root_quat, dq=ref.dq,
                          base_lin_vel=ref.root_lin_vel, base_ang_vel=ref.root_ang_vel)
-
-    def _place_mid_gait(self) -> None:
-        """A demonstration with no reference state to start from (a video): start in the gait
-        prior's pose at the phase the clock starts at, joints moving as the TG does, the base
-        moving forwards at a speed drawn from [0, ``start_speed``] m/s, as a reference state
-        initialisation would start it somewhere in the video's motion."""
-        tg, hz = self.actions.tg, self.contract.clock_hz
-        phase, h = (self.demo_step * self.robot.control_dt * hz) % 1.0, 0.01        # cycles
-        q = tg.joint_targets(phase)                                                   # rad
-        dq = (tg.joint_targets((phase + h) % 1.0) - tg.joint_targets((phase - h) % 1.0)) / (2 * h) * hz   # rad/s
-        v = float(self.np_random.uniform(0.0, self.cfg.episode.start_speed))          # m/s
-        self.world.reset(q=self.robot.clip_to_limits(q), dq=dq, base_lin_vel=np.array([v, 0.0, 0.0]))
 
     def step(self, action: np.ndarray):
         """Apply one action (see module doc) for one control period."""

@@ -152,19 +152,3 @@ def drawn_as(run_dir: Path, robot: str) -> str | None:
     body = json.loads(fit.read_text()).get("body")
     return body if body and body != robot else None
 
-
-
-def start_speed(run_dir: Path, demo) -> float:
-    """The speed (m/s) the envs' episodes start at up to (``start_speed``) when the demonstration
-    is a video alone: the speed of the gait the prior's fit read in it (its kept finalist as fitted,
-    before any slowing: ``prior_fit.json``), so that the policy learns from starts within the
-    video's motion as reference state initialisation gives a demonstration with a motion; 0 for
-    a demonstration with a motion or no fit."""
-    from virl_quad.policy.tg import TGParams
-    from virl_quad.training.prior_check import nominal_speed
-
-    fit = run_dir / "prior_fit.json"
-    if demo.motion is not None or not fit.exists():
-        return 0.0
-    report = json.loads(fit.read_text())
-    return nominal_speed(TGParams.from_dict(report["finalists"][report.get("kept_finalist", 0)]["tg"]))
