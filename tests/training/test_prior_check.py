@@ -151,19 +151,3 @@ def test_a_video_without_a_patterned_ground_keeps_its_gait(demo) -> None:
     report = {"physics_check": [{"finalist": 0, "travel_m": -1.0, "fall_rate": 0.0}], "kept_finalist": 0}
     assert gait_for_travel(PUPPER, plain, _trot(), report, STEPS, 0, False) == _trot()
     assert report["variant"] is None and "travel_check" not in report
-
-
-def test_a_slowed_gait_also_tries_the_slowed_variants_none_faster_than_the_video(demo) -> None:
-    from virl_quad.training.prior_check import GAIT_VARIANTS, SLOWED_VARIANTS, gait_for_travel
-
-    slow = at_speed(_flying_trot(), nominal_speed(_trot()))               # as slowed_to_carry leaves it
-    video = at_speed(_flying_trot(), 1.1 * nominal_speed(slow))           # the video's gait: 1.1x as fast
-    report = {"physics_check": [{"finalist": 0, "travel_m": -1.0, "fall_rate": 0.0, "speed_mps": -0.1}],
-              "kept_finalist": 0, "slowed_to_mps": nominal_speed(slow), "finalists": [{"tg": video.to_dict()}]}
-    gait_for_travel(PUPPER, demo, slow, report, STEPS, 0, False, lambda line: None)
-    tried = {(r["hind_back_m"], r["swing_scale"], r["step_scale"]) for r in report["travel_check"]}
-    assert tried == {v for v in GAIT_VARIANTS + SLOWED_VARIANTS if v[2] == 1.0}   # x1.2 and x1.5: faster than the video
-    assert set(SLOWED_VARIANTS) & tried
-    del report["slowed_to_mps"]                                           # a gait the robot carries as fitted
-    gait_for_travel(PUPPER, demo, slow, report, STEPS, 0, False, lambda line: None)
-    assert {(r["hind_back_m"], r["swing_scale"], r["step_scale"]) for r in report["travel_check"]} == set(GAIT_VARIANTS)

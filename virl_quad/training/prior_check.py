@@ -25,13 +25,11 @@ teacher travels against the way the video's ground slides
 (:func:`virl_quad.reward.egomotion.clip_speed`), or at under :data:`MIN_SPEED_SHARE` of the
 gait's own speed (step length x frequency / duty), the :data:`GAIT_VARIANTS` are tried and the
 one whose teacher goes furthest the video's way, falling in at most half its episodes (or no
-more than the kept gait's own teacher), is kept; for a gait slowed to carry the robot, the
-:data:`SLOWED_VARIANTS` as well, up to the video's own speed. The contact sheet shows the fitted gait before it.
+more than the kept gait's own teacher), is kept. The contact sheet shows the fitted gait before it.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
@@ -130,13 +128,6 @@ MIN_SPEED_SHARE = 1.0 / 3.0
 GAIT_VARIANTS = ((0.01, 1.0, 1.0), (0.02, 1.0, 1.0), (0.0, 2.0, 1.0), (0.01, 2.0, 1.0), (0.02, 2.0, 1.0),
                  (0.02, 0.67, 1.5), (0.03, 0.5, 1.5))
 
-#: Variants also tried when the video's gait was slowed to carry the robot
-#: (:func:`slowed_to_carry`): the slowed gait's tracker goes well under the video's speed (the dog
-#: trot's, on Pupper: 0.14 m/s of the video's 0.65), and one with the hind feet 3-5 cm back and a
-#: middling swing goes up to 1.7x as far, at its slowed speed or 1.2x it (docs/experiments.md).
-#: A variant faster than the video's own gait is not tried.
-SLOWED_VARIANTS = ((0.03, 1.5, 1.0), (0.05, 1.5, 1.0), (0.03, 1.5, 1.2), (0.04, 1.5, 1.2))
-
 
 def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float,
                  step_scale: float = 1.0) -> TGParams:
@@ -160,15 +151,13 @@ def nominal_speed(tg: TGParams) -> float:
 
 
 def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: float, steps: int, seed: int,
-                 randomize: bool, log: Callable[[str], None] = print, variants=GAIT_VARIANTS,
-                 max_speed: float = math.inf) -> tuple[TGParams, list[dict]]:
+                 randomize: bool, log: Callable[[str], None] = print) -> tuple[TGParams, list[dict]]:
     """When ``tg``'s teacher (its :func:`teacher_trial` figures: ``trial``) travels against
     ``direction`` (+1: the video's subject goes forwards, -1: backwards) or at under
-    :data:`MIN_SPEED_SHARE` of :func:`nominal_speed`, try ``variants`` ((hind feet back m, swing
-    factor, step factor) each; those whose :func:`nominal_speed` exceeds ``max_speed`` m/s are
-    skipped) and keep the one that travels furthest in ``direction`` among those whose teacher
-    falls in at most ``max(MAX_FALL_RATE, trial's fall rate)`` of its episodes (none: ``tg``).
-    Returns the kept TG and one row per variant tried."""
+    :data:`MIN_SPEED_SHARE` of :func:`nominal_speed`, try the :data:`GAIT_VARIANTS` and keep the
+    one that travels furthest in ``direction`` among those whose teacher falls in at most
+    ``max(MAX_FALL_RATE, trial's fall rate)`` of its episodes (none: ``tg``). Returns the kept TG
+    and one row per variant tried."""
     speed = trial["speed_mps"] * direction                               # m/s the video's way
     if trial["travel_m"] * direction < 0:
         log("  the kept gait's tracker travels against the video's ground slide: trying gait variants")
@@ -179,12 +168,10 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
         return tg, []
     allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
     best, best_travel, best_row, rows = tg, trial["travel_m"] * direction, None, []
-    for hind_back, swing_scale, step_scale in variants:
+    for hind_back, swing_scale, step_scale in GAIT_VARIANTS:
         try:
             moved = with_variant(spec, tg, hind_back, swing_scale, step_scale)
         except ValueError:
-            continue
-        if nominal_speed(moved) > max_speed * 1.001:
             continue
         row = {"hind_back_m": hind_back, "swing_scale": swing_scale, "step_scale": step_scale,
                **teacher_trial(spec, demo, moved, steps, seed, randomize)}
@@ -203,8 +190,7 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
     """The video fit's kept TG (``report``: the fit's report, with its ``physics_check`` rows and
     ``kept_finalist``), changed by :func:`pick_variant` when its teacher travels against the
     ground's slide in the demonstration, or too slowly (a video with no patterned ground:
-    unchanged); a gait slowed to carry the robot (``slowed_to_mps`` in ``report``) also tries
-    :data:`SLOWED_VARIANTS`, none faster than its finalist as fitted. Adds
+    unchanged). Adds
     ``travel_check`` (rows) and ``variant`` (the kept one, or None) to ``report``."""
     from virl_quad.reward.egomotion import clip_speed, search_reach
 
@@ -214,12 +200,8 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
     report["variant"] = None
     if slide is None or trial is None:
         return tg
-    variants, max_speed = GAIT_VARIANTS, math.inf
-    if report.get("slowed_to_mps"):                                     # the video's own gait is faster
-        variants = GAIT_VARIANTS + SLOWED_VARIANTS
-        max_speed = nominal_speed(TGParams.from_dict(report["finalists"][report["kept_finalist"]]["tg"]))
     moved, report["travel_check"] = pick_variant(spec, demo, tg, trial, -float(np.sign(slide)), steps, seed,
-                                                 randomize, log, variants, max_speed)
+                                                 randomize, log)
     kept = next((r for r in report["travel_check"] if r.get("kept")), None)
     if kept is not None:
         report["variant"] = {k: kept[k] for k in ("hind_back_m", "swing_scale", "step_scale")}
