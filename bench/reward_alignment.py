@@ -140,18 +140,18 @@ def main() -> int:
     torch.set_num_threads(1)
     if a.fresh:
         a.ground = a.ground or DEFAULT_GROUND
-        probe = None
+        fixed = None
         if a.probe_every:
             fixed = record(a.robot, demo_lib.load(a.demo, a.robot, ground=a.ground), a.demo, tuple(range(a.seeds)),
                            a.seconds, not a.no_randomize, a.ground)
 
-            def probe(model, updates: int) -> None:
-                rho, rewards = alignment(model, fixed)
-                by = {name: r for name, r, _ in table(fixed, rewards)}
-                print(f"after {updates:5d} updates: rank correlation {rho:+.2f}, reward of the tracker "
-                      f"{by['tracker, alpha 1']:.3f}, of standing still {by['standing still']:.3f}", flush=True)
+        def probe(model, updates: int) -> None:
+            rho, rewards = alignment(model, fixed)
+            by = {name: r for name, r, _ in table(fixed, rewards)}
+            print(f"after {updates:5d} updates: rank correlation {rho:+.2f}, reward of the tracker "
+                  f"{by['tracker, alpha 1']:.3f}, of standing still {by['standing still']:.3f}", flush=True)
         try:
-            rm, demo, robot = fresh_model(a, probe)
+            rm, demo, robot = fresh_model(a, probe if fixed is not None else None)
         except (TypeError, ValueError) as e:
             raise SystemExit(f"error: {e}") from None
     elif a.run_dir is None:
