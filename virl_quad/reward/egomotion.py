@@ -164,9 +164,6 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     ([M, H, W] uint8, pairwise), searched within +-``reach`` px: positive when it slides right
     (the subject of a camera looking from its right side moves left, backwards). NaN where the
     two frames share too little ground or the ground shows no pattern."""
-    reach = int(reach)
-    if reach < 2:
-        raise ValueError(f"reach must be at least 2 px, got {reach}")
     a = torch.as_tensor(np.asarray(earlier), dtype=torch.int64)
     b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
     if a.shape != b.shape or a.ndim != 3:
@@ -187,6 +184,9 @@ def ground_fields(frames: np.ndarray | torch.Tensor, levels: np.ndarray) -> tupl
 
 def _best_shift(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor, reach: int) -> torch.Tensor:
     """:func:`ground_shift` of two stacks of :func:`ground_fields`."""
+    reach = int(reach)
+    if reach < 2:
+        raise ValueError(f"reach must be at least 2 px, got {reach}")
     m_ = fa.shape[0]
     cost = _shift_costs(fa, ma, fb, mb, reach)
     rows = torch.arange(m_)
