@@ -36,6 +36,7 @@ MIN_VALID = 0.5      # share of a clip's frame pairs that must give a shift for 
 MIN_CONTRAST = 0.2   # relative rise of the cost away from its best shift: below, no pattern to see
 MIN_SLIDE = 0.1      # px per frame, a clip's slide under which its window cannot alias
 HEADROOM = 1.5       # an agent this many times as fast as the demonstration still reads within the search
+CENTRE = 128.0       # gray level subtracted before the FFTs (keeps their sums small)
 
 
 def window_steps(fps: float) -> int:
@@ -132,29 +133,38 @@ def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tens
     return conv(x * m) / weight.clamp(min=1e-6), weight > 0.95
 
 
-def _shift_costs(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor,
-                 reach: int = MAX_DX) -> torch.Tensor:
-    """Mean squared difference [M, 2 MAX_DY + 1, 2 reach + 1] between ``fa`` and ``fb`` moved by
-    (dy, dx) over the pixels that are ground in both (inf where fewer than :data:`MIN_PIXELS`).
-    Each of its sums over pixels is a cross-correlation, done at once for every shift by FFT:
+def _spectra(f: torch.Tensor, m: torch.Tensor, reach: int) -> torch.Tensor:
+    """What :func:`_shift_costs` correlates of one stack of :func:`ground_fields` [M, H, W]: the
+    2-D spectra [M, 3, ...] of the mask, the masked ground and its square (gray levels taken
+    from :data:`CENTRE`: the sum of squared differences does not change, and float32 keeps it
+    to ~1e-3 of a gray level squared per pixel), zero-padded for shifts up to ``reach`` px."""
+    h, w = f.shape[1:]
+    m0 = m.to(torch.float32)
+    x = (f - CENTRE) * m0
+    return torch.fft.rfft2(torch.stack([m0, x, x * (f - CENTRE)], 1), s=_padded(h, w, reach))
+
+
+def _padded(h: int, w: int, reach: int) -> tuple[int, int]:
+    """FFT size for an (h, w) frame: zero padding, so no shift searched wraps round."""
+    return h + MAX_DY + 1, w + reach + 1
+
+
+def _shift_costs(sa: torch.Tensor, sb: torch.Tensor, h: int, w: int, reach: int) -> torch.Tensor:
+    """Mean squared difference [M, 2 MAX_DY + 1, 2 reach + 1] between frames ``a`` and ``b``
+    (their :func:`_spectra`, (h, w) px) with ``b`` moved by (dy, dx), over the pixels that are
+    ground in both (inf where fewer than :data:`MIN_PIXELS`). Each of its sums over pixels is a
+    cross-correlation, done at once for every shift by FFT:
     sum m_a m_b (a - b)^2 = corr(m_a a^2, m_b) + corr(m_a, m_b b^2) - 2 corr(m_a a, m_b b)."""
-    h, w = fa.shape[1:]
-    size = (h + MAX_DY + 1, w + reach + 1)                # zero padding: no wrap within the shifts searched
-    a0, b0 = ma.to(torch.float64), mb.to(torch.float64)
-    a1, b1 = a0 * fa.to(torch.float64), b0 * fb.to(torch.float64)
-    spec = {name: torch.fft.rfft2(x, s=size) for name, x in
-            (("a0", a0), ("a1", a1), ("a2", a1 * fa), ("b0", b0), ("b1", b1), ("b2", b1 * fb))}
-
-    def corr(f: torch.Tensor) -> torch.Tensor:            # c[dy, dx] = sum_p A[p] B[p + (dy, dx)]
-        c = torch.fft.irfft2(f, s=size)
-        rows = torch.arange(-MAX_DY, MAX_DY + 1) % size[0]
-        cols = torch.arange(-reach, reach + 1) % size[1]
-        return c[:, rows][:, :, cols]
-
-    count = corr(spec["a0"].conj() * spec["b0"]).round()
-    ssd = corr(spec["a2"].conj() * spec["b0"] + spec["a0"].conj() * spec["b2"]
-               - 2 * spec["a1"].conj() * spec["b1"]).clamp(min=0.0)
-    cost = (ssd / count.clamp(min=1.0)).to(torch.float32)
+    size = _padded(h, w, reach)
+    a, b = sa.conj(), sb
+    products = torch.stack([a[:, 0] * b[:, 0],
+                            a[:, 2] * b[:, 0] + a[:, 0] * b[:, 2] - 2 * a[:, 1] * b[:, 1]], 1)
+    c = torch.fft.irfft2(products, s=size)               # c[dy, dx] = sum_p A[p] B[p + (dy, dx)]
+    rows = torch.arange(-MAX_DY, MAX_DY + 1) % size[0]
+    cols = torch.arange(-reach, reach + 1) % size[1]
+    c = c[:, :, rows][:, :, :, cols]
+    count, ssd = c[:, 0].round(), c[:, 1].clamp(min=0.0)
+    cost = ssd / count.clamp(min=1.0)
     return torch.where(count >= MIN_PIXELS, cost, torch.full_like(cost, float("inf")))
 
 
@@ -170,7 +180,8 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
         raise ValueError(f"expected two [M, H, W] frame stacks of one shape, got {list(a.shape)}, {list(b.shape)}")
     fa, ma = ground_fields(a, levels)
     fb, mb = ground_fields(b, levels)
-    return _best_shift(fa, ma, fb, mb, reach)
+    reach = _checked(reach)
+    return _best_shift(_spectra(fa, ma, reach), _spectra(fb, mb, reach), a.shape[1:], reach)
 
 
 def ground_fields(frames: np.ndarray | torch.Tensor, levels: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
@@ -182,13 +193,17 @@ def ground_fields(frames: np.ndarray | torch.Tensor, levels: np.ndarray) -> tupl
     return _blur(x.to(torch.float32), table[x.clamp(0, 255)])
 
 
-def _best_shift(fa: torch.Tensor, ma: torch.Tensor, fb: torch.Tensor, mb: torch.Tensor, reach: int) -> torch.Tensor:
-    """:func:`ground_shift` of two stacks of :func:`ground_fields`."""
-    reach = int(reach)
-    if reach < 2:
+def _checked(reach: int) -> int:
+    """``reach`` (px) as an int; ValueError under 2 (the sub-pixel step needs a shift each side)."""
+    if int(reach) < 2:
         raise ValueError(f"reach must be at least 2 px, got {reach}")
-    m_ = fa.shape[0]
-    cost = _shift_costs(fa, ma, fb, mb, reach)
+    return int(reach)
+
+
+def _best_shift(sa: torch.Tensor, sb: torch.Tensor, shape: tuple[int, int], reach: int) -> torch.Tensor:
+    """:func:`ground_shift` of two stacks of :func:`_spectra` of (H, W) = ``shape`` frames."""
+    m_ = sa.shape[0]
+    cost = _shift_costs(sa, sb, int(shape[0]), int(shape[1]), reach)
     rows = torch.arange(m_)
     best = cost.reshape(m_, -1).argmin(1)
     iy, ix = best // cost.shape[2], (best % cost.shape[2]).clamp(1, 2 * reach - 1)
@@ -242,7 +257,7 @@ class VideoSpeedTerm:
         self.sigma = max(abs(self.target), 1.0)                  # px per window
         self.fps = float(fps)
         self.k = int(window)                                     # frames: the window the target was measured over
-        self.reach = int(reach)                                  # px
+        self.reach = _checked(reach)                             # px
         self.num_envs = int(num_envs)
         self._history: torch.Tensor | None = None                # [k, N, H, W] uint8: the last k frames
         self._age = torch.zeros(self.num_envs, dtype=torch.int64)  # frames of the episode before the next
@@ -288,8 +303,9 @@ class VideoSpeedTerm:
             ids = torch.cat([t_idx, t_idx + self.k]) * n + torch.cat([n_idx, n_idx])   # blur each frame once
             unique, inverse = torch.unique(ids, return_inverse=True)
             f, m = ground_fields(frames.reshape(-1, *frames.shape[2:])[unique], self.agent_levels)
+            spec = _spectra(f, m, self.reach)                 # and transform it once
             a, b = inverse[:len(t_idx)], inverse[len(t_idx):]
-            shifts[t_idx, n_idx] = _best_shift(f[a], m[a], f[b], m[b], self.reach)
+            shifts[t_idx, n_idx] = _best_shift(spec[a], spec[b], f.shape[1:], self.reach)
         given = torch.full((steps, n), float("nan"))
         held, has = self._held.clone(), self._has.clone()
         for t in range(steps):
