@@ -136,8 +136,8 @@ def _blur(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tens
 def _spectra(f: torch.Tensor, m: torch.Tensor, reach: int) -> torch.Tensor:
     """What :func:`_shift_costs` correlates of one stack of :func:`ground_fields` [M, H, W]: the
     2-D spectra [M, 3, ...] of the mask, the masked ground and its square (gray levels taken
-    from :data:`CENTRE`: the sum of squared differences does not change, and float32 keeps it
-    to ~1e-3 of a gray level squared per pixel), zero-padded for shifts up to ``reach`` px."""
+    from :data:`CENTRE`: the sum of squared differences does not change, and in float32 the
+    shifts then match float64's to ~1e-6 px), zero-padded for shifts up to ``reach`` px."""
     h, w = f.shape[1:]
     m0 = m.to(torch.float32)
     x = (f - CENTRE) * m0
@@ -178,9 +178,9 @@ def ground_shift(earlier: np.ndarray | torch.Tensor, later: np.ndarray | torch.T
     b = torch.as_tensor(np.asarray(later), dtype=torch.int64)
     if a.shape != b.shape or a.ndim != 3:
         raise ValueError(f"expected two [M, H, W] frame stacks of one shape, got {list(a.shape)}, {list(b.shape)}")
+    reach = _checked(reach)
     fa, ma = ground_fields(a, levels)
     fb, mb = ground_fields(b, levels)
-    reach = _checked(reach)
     return _best_shift(_spectra(fa, ma, reach), _spectra(fb, mb, reach), a.shape[1:], reach)
 
 
