@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from virl_quad import robots
 from virl_quad.cli import opt, parser_from_dataclass
-from virl_quad.quiet import quiet_fd
+from virl_quad.quiet import import_pybullet_quietly
 
 CHOICES = (*robots.names(), "all")
 
@@ -63,8 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         _parser().error(f"unknown robot {args.robot!r}; choose one of: {', '.join(CHOICES)}")
     if args.samples < 1:
         _parser().error(f"--samples must be >= 1, got {args.samples}")
-    with quiet_fd(2):  # pybullet's import banner
-        import pybullet  # noqa: F401
+    import_pybullet_quietly()
     from virl_quad.kinematics.checks import run_checks
 
     names = robots.names() if args.robot == "all" else (args.robot,)
