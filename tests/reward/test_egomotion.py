@@ -194,5 +194,5 @@ def test_a_search_under_two_px_is_refused_by_the_term_too() -> None:
     frames = _scene(np.array([0, 2]))
     with pytest.raises(ValueError, match="reach"):
         eg.ground_shift(frames[:1], frames[1:], np.array([DARK, LIGHT]), reach=1)
-    with pytest.raises(ValueError, match="reach"):                # at once, not at its first rollout
+    with pytest.raises(ValueError, match="reach"):                # when the term is built
         eg.VideoSpeedTerm(-2.0, 50.0, np.array([DARK, LIGHT]), 1, 1, reach=1)
