@@ -54,7 +54,9 @@ def test_bad_input_is_one_error_line_and_exit_2(module: str, args: list[str], me
                                           ("virl_quad.evaluate", ["--policy", "p.pt", "--episodes", "0"]),
                                           ("virl_quad.export", ["no/such/run", "--out", "x.pt"]),
                                           ("virl_quad.export", ["run", "--out", "x.onnx"]),
-                                          ("virl_quad.deploy.serve", ["--policy", "missing.pt"])])
+                                          ("virl_quad.deploy.serve", ["--policy", "missing.pt"]),
+                                          ("virl_quad.distill", ["--robot", "spot"]),
+                                          ("virl_quad.distill", ["--rounds", "0"])])
 def test_bad_options_are_refused_before_torch_and_the_simulator_load(module: str, args: list[str],
                                                                     tmp_path: Path) -> None:
     """A mistyped option is answered at once: nothing heavy is imported on the way to the error."""

@@ -94,3 +94,16 @@ def test_runs_go_at_once_as_ray_tasks(tmp_path: Path) -> None:
     (a0, a1), (b0, b1) = ((results[r]["start"], results[r]["end"]) for r in ("oracle", "prior"))
     assert a0 < b1 and b0 < a1, results                 # the two runs overlapped
     assert all(results[r]["iterations"] == 2 for r in ("oracle", "prior"))
+
+
+def test_each_run_is_budgeted_by_the_clock_alone(tmp_path: Path) -> None:
+    """No arm of a comparison stops at train's default iteration cap before its minutes are up;
+    an iteration count in --train-args still wins (it comes later on the command line)."""
+    from virl_quad.compare import CompareArgs
+    from virl_quad.schedule import ITERATION_CAP, Job, train_argv
+    from virl_quad.training.config import TrainArgs
+
+    argv = train_argv(CompareArgs(minutes=3.0), Job("prior", tmp_path / "prior"))
+    assert argv[argv.index("--iterations") + 1] == str(ITERATION_CAP) and ITERATION_CAP > 100 * TrainArgs().run.iterations
+    argv = train_argv(CompareArgs(train_args="--iterations 2"), Job("prior", tmp_path / "prior"))
+    assert argv[len(argv) - 1 - argv[::-1].index("--iterations") + 1] == "2"

@@ -26,6 +26,12 @@ class Job:
     demo: str = ""
 
 
+#: The iteration cap of every run: out of reach, so that the wall clock (``--minutes``) is the one
+#: budget and an arm whose iterations are cheap (``prior``: no frames) does not stop early at
+#: ``virl_quad.train``'s default cap. ``--train-args "--iterations N"`` still sets one.
+ITERATION_CAP = 1_000_000
+
+
 def train_argv(args, job: Job, num_workers: int | None = None) -> list[str]:
     """The ``virl_quad.train`` options of ``job`` under the comparison's options ``args`` (paths
     absolute: a run on another machine of a cluster starts in another folder)."""
@@ -33,7 +39,7 @@ def train_argv(args, job: Job, num_workers: int | None = None) -> list[str]:
     if Path(demo).exists():
         demo = str(Path(demo).resolve())
     argv = ["--robot", args.robot, "--demo", demo, "--reward", job.reward, "--minutes", str(args.minutes),
-            "--seed", str(args.seed), "--run-dir", str(job.run_dir.resolve()),
+            "--iterations", str(ITERATION_CAP), "--seed", str(args.seed), "--run-dir", str(job.run_dir.resolve()),
             "--video" if args.video else "--no-video"]
     if num_workers is not None:
         argv += ["--num-workers", str(num_workers)]

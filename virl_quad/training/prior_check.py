@@ -9,7 +9,7 @@ tip a Pupper over on every other step. A teacher that falls in most of its episo
 DAgger a student that falls as often, and PPO a policy that does.
 
 :func:`pick_carrying` runs the teacher exactly as the warm start's first round gathers
-(:func:`virl_quad.distill.gather`: observed joint angles, action noise, the run's domain
+(:func:`virl_quad.training.dagger.gather`: observed joint angles, action noise, the run's domain
 randomisation) on each finalist, nearest first, and keeps the first whose teacher falls in
 at most :data:`MAX_FALL_RATE` of its episodes; when none does, the one that falls least,
 with a warning.
@@ -47,7 +47,8 @@ def teacher_trial(spec: RobotSpec, demo, tg: TGParams, steps: int, seed: int, ra
     """The warm-start teacher of ``tg`` for ``steps`` control steps: ``{"episodes", "falls",
     "fall_rate", "travel_m", "speed_mps"}`` (mean forward travel per episode, m; forward travel
     over the time run, m/s)."""
-    from virl_quad.distill import DistillArgs, gather, gathering_envs
+    from virl_quad.distill import DistillArgs
+    from virl_quad.training.dagger import gather, gathering_envs
     from virl_quad.training.warm_start import TGMotion
 
     args = DistillArgs(robot=spec.name, rounds=1, steps=steps, seed=seed, quiet=True, randomize=randomize,

@@ -10,7 +10,7 @@ measured joint error on top of the TG's next pose,
 needs no feedback) follows it
 (``virl_quad.evaluation.tracker``). It needs nothing but the TG and the robot's own joint
 angles, which the policy observes (the TG phase too), so it is a function of the observation
-and a proprioceptive policy can represent it: ``virl_quad.distill``'s DAgger copies it into
+and a proprioceptive policy can represent it: ``virl_quad.training.dagger`` copies it into
 the actor (the training architecture and observation) in a few minutes. PPO then starts from
 a policy that walks, with a critic fitted to it first (:meth:`VirlPPO.freeze_actor`).
 """
@@ -55,7 +55,8 @@ def distill_into(actor: torch.nn.Module, spec: RobotSpec, demo, tg: TGParams, hi
     domain randomisation when ``randomize`` (the teacher feeds back the observed joint angles,
     so its action stays a function of the observation); returns the student's last round
     statistics (episodes, falls, mean travel in m)."""
-    from virl_quad.distill import DistillArgs, distil
+    from virl_quad.distill import DistillArgs
+    from virl_quad.training.dagger import distil
 
     args = DistillArgs(robot=spec.name, rounds=rounds, steps=steps, hidden=hidden, seed=seed, quiet=True,
                        randomize=randomize, gain=spec.tracker_gain, lead=spec.tracker_lead,
