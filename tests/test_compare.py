@@ -104,6 +104,7 @@ def test_each_run_is_budgeted_by_the_clock_alone(tmp_path: Path) -> None:
     from virl_quad.training.config import TrainArgs
 
     argv = train_argv(CompareArgs(minutes=3.0), Job("prior", tmp_path / "prior"))
-    assert argv[argv.index("--iterations") + 1] == str(ITERATION_CAP) and ITERATION_CAP > 100 * TrainArgs().run.iterations
+    assert argv[argv.index("--iterations") + 1] == str(ITERATION_CAP)
+    assert ITERATION_CAP > 100 * TrainArgs().run.iterations
     argv = train_argv(CompareArgs(train_args="--iterations 2"), Job("prior", tmp_path / "prior"))
     assert argv[len(argv) - 1 - argv[::-1].index("--iterations") + 1] == "2"

@@ -14,9 +14,9 @@ from tensordict import TensorDict
 from virl_quad import demo as demo_lib
 from virl_quad import envs
 from virl_quad.distill import DistillArgs, main
-from virl_quad.training.dagger import fit, gather
 from virl_quad.export import fresh_actor
 from virl_quad.policy_io import load_policy
+from virl_quad.training.dagger import fit, gather
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -76,7 +76,8 @@ def gather(envs_pair: tuple, actor: torch.nn.Module | None, beta: float, steps: 
                 action = teacher
             else:
                 with torch.inference_mode():
-                    action = actor(TensorDict({"policy": torch.as_tensor(obs["policy"])[None]}, batch_size=[1]))[0].numpy()
+                    batch = TensorDict({"policy": torch.as_tensor(obs["policy"])[None]}, batch_size=[1])
+                    action = actor(batch)[0].numpy()
             if args.noise > 0:
                 action = action + rng.normal(0.0, args.noise, size=action.shape)
             obs, _, terminated, truncated, _ = env.step(action)
