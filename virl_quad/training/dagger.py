@@ -8,20 +8,17 @@ everything gathered (mean-squared error, the observation normaliser set to the d
 and standard deviation). Half the episodes start from the default pose at phase 0 (as a
 HAL does), half by reference state initialisation at a random phase (as training does).
 
-Four choices make the student learnable and sturdier:
+Four choices make the student learnable and sturdier (the figures: docs/experiments.md):
 - the teacher feeds back the joint angles of the observation (what the student measures),
   not the simulator's true ones, so a label is a function of the observation;
 - the student is blind to the last-action input (first-layer weights held at zero): the
   teacher's previous action predicts its next one so well that a student copies it and
   then drifts on its own actions (causal confusion);
-- no domain randomisation by default: with it (observation latency up to 40 ms) held-out
-  error was 100x higher and the observation-fed tracker itself fell in 1 of 3 episodes;
-  with the latency held at 0 (``--randomize --max-latency 0``) the student still got worse
-  round by round (mean travel +0.78 m in round 2, -0.45 m in round 5);
+- no domain randomisation by default for ``python -m virl_quad.distill``: under the
+  observation latency it draws, the observation-fed tracker itself falls and the student's
+  error grows round by round;
 - Gaussian noise (std 0.1 action units) on every executed action while gathering: the
-  student sees states off the teacher's path. Under the training's domain randomisation it
-  fell in 5 of 30 evaluation episodes, against 14 of 30 for the same recipe without noise,
-  at a lower score on the nominal robot (1.24x the default pose against 1.68x).
+  student sees states off the teacher's path and falls less under randomisation.
 """
 
 from __future__ import annotations
