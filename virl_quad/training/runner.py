@@ -276,5 +276,6 @@ class VirlRunner(OnPolicyRunner):
         w.add_scalar("time/reward_and_returns_s", returns, it)
         w.add_scalar("time/ppo_update_s", update, it)
         w.add_scalar("policy/action_std", float(self.alg.get_policy().output_std.detach().mean()), it)
+        w.add_scalar("policy/learning_rate", float(self.alg.learning_rate), it)   # the actor's, KL-adaptive
         for k, v in {**losses, **info}.items():
             w.add_scalar(f"loss/{k}", float(v), it)
