@@ -128,3 +128,46 @@ def test_an_encoder_that_never_spread_is_not_called_collapsed():
         VirlRunner._warn_collapse(runner, it, spread, lines.append)
     assert len(lines) == 1 and "still encodes the demonstration's frames alike after 120 iterations" in lines[0]
     assert "collapsed" not in lines[0]
+
+
+def test_the_first_actor_update_at_the_default_rate_keeps_the_policy_close():
+    """Adam's first steps move every weight by about the learning rate, whatever the gradient's
+    size: at the run's widths and action std (0.05) a rate far above the KL schedule's floor moves
+    a warm-started policy's mean by about one std in one update."""
+    args = TrainArgs.make()
+    cfg = rsl_rl_config(args)
+    cfg["algorithm"]["class_name"] = VirlPPO
+    cfg["multi_gpu"] = None
+    gen = torch.Generator().manual_seed(0)
+
+    class Env:
+        num_envs, num_actions, device = 16, 14, "cpu"
+
+        def get_observations(self) -> TensorDict:
+            return TensorDict({"policy": torch.zeros(16, 48), "privileged": torch.zeros(16, 8)}, batch_size=[16])
+
+    env = Env()
+    with contextlib.redirect_stdout(io.StringIO()):
+        alg = VirlPPO.construct_algorithm(env.get_observations(), env, cfg, "cpu")
+    alg.train_mode()
+    seen = []
+    for _ in range(cfg["num_steps_per_env"]):
+        obs = TensorDict({"policy": torch.randn(16, 48, generator=gen), "privileged": torch.randn(16, 8, generator=gen)},
+                         batch_size=[16])
+        seen.append(obs["policy"])
+        with torch.inference_mode():
+            alg.act(obs)
+            super(VirlPPO, alg).process_env_step(obs, torch.randn(16, generator=gen), torch.zeros(16),
+                                                 {"time_outs": torch.zeros(16)})
+    with torch.inference_mode():
+        super(VirlPPO, alg).compute_returns(obs)
+    batch = TensorDict({"policy": torch.cat(seen)}, batch_size=[len(seen) * 16])
+    with torch.no_grad():
+        alg.actor(batch, stochastic_output=True)
+        before = [p.clone() for p in alg.actor.output_distribution_params]
+    alg.update()
+    with torch.no_grad():
+        alg.actor(batch, stochastic_output=True)
+        kl = alg.actor.get_kl_divergence(tuple(before), alg.actor.output_distribution_params).mean()
+    assert abs(float(before[1].mean()) - args.ppo.init_std) < 1e-6
+    assert kl < 0.3, f"KL of the first update {float(kl):.3g}"
