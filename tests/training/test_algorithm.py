@@ -1,5 +1,6 @@
-"""VirlPPO's critic warm-up: while the actor is frozen an update moves the critic alone and
-leaves the learning rate where it was."""
+"""VirlPPO on a synthetic rollout (no simulation is stepped): the critic warm-up moves the critic
+alone, the actor's normaliser stays fixed, the anchor pulls the actor back to the warm start, and
+the first update at the default rate keeps the policy close; the runner's collapse warning."""
 
 from __future__ import annotations
 
@@ -16,34 +17,43 @@ from virl_quad.training.config import TrainArgs, rsl_rl_config
 class _Env:
     """The smallest VecEnv rsl-rl's PPO constructor reads (no simulation is stepped here)."""
 
-    num_envs, num_actions, device = 4, 3, "cpu"
+    def __init__(self, envs: int = 4, obs: int = 5, actions: int = 3, privileged: int = 2) -> None:
+        self.num_envs, self.num_actions, self.device = envs, actions, "cpu"
+        self.sizes = {"policy": obs, "privileged": privileged}
 
     def get_observations(self) -> TensorDict:
-        return TensorDict({"policy": torch.zeros(4, 5), "privileged": torch.zeros(4, 2)}, batch_size=[4])
+        return TensorDict({k: torch.zeros(self.num_envs, n) for k, n in self.sizes.items()},
+                          batch_size=[self.num_envs])
 
 
-def _ppo() -> VirlPPO:
-    cfg = rsl_rl_config(TrainArgs.make(hidden="8"))
+def _ppo(args: TrainArgs | None = None, env: _Env | None = None) -> VirlPPO:
+    cfg = rsl_rl_config(args or TrainArgs.make(hidden="8"))
     cfg["algorithm"]["class_name"] = VirlPPO
     cfg["multi_gpu"] = None
-    env = _Env()
+    env = env or _Env()
     with contextlib.redirect_stdout(io.StringIO()):
         alg = VirlPPO.construct_algorithm(env.get_observations(), env, cfg, "cpu")
     return alg
 
 
-def _fill(alg: VirlPPO, steps: int = 8) -> None:
+def _fill(alg: VirlPPO, steps: int = 8, env: _Env | None = None) -> list[torch.Tensor]:
+    """Store a rollout of random observations and rewards (``env``'s sizes, default
+    :class:`_Env`'s); its policy observations."""
     gen = torch.Generator().manual_seed(0)
+    env = env or _Env()
+    n, sizes = env.num_envs, env.sizes
     alg.train_mode()
+    seen = []
     for _ in range(steps):
-        obs = TensorDict({"policy": torch.randn(4, 5, generator=gen), "privileged": torch.randn(4, 2, generator=gen)},
-                         batch_size=[4])
+        obs = TensorDict({k: torch.randn(n, m, generator=gen) for k, m in sizes.items()}, batch_size=[n])
+        seen.append(obs["policy"])
         with torch.inference_mode():
             alg.act(obs)
             PPO_step = super(VirlPPO, alg).process_env_step
-            PPO_step(obs, torch.randn(4, generator=gen), torch.zeros(4), {"time_outs": torch.zeros(4)})
+            PPO_step(obs, torch.randn(n, generator=gen), torch.zeros(n), {"time_outs": torch.zeros(n)})
     with torch.inference_mode():
         super(VirlPPO, alg).compute_returns(obs)
+    return seen
 
 
 def test_frozen_update_moves_the_critic_alone_and_keeps_the_learning_rate():
@@ -135,33 +145,10 @@ def test_the_first_actor_update_at_the_default_rate_keeps_the_policy_close():
     size: at the run's widths and action std (0.05) a rate far above the KL schedule's floor moves
     a warm-started policy's mean by about one std in one update."""
     args = TrainArgs.make()
-    cfg = rsl_rl_config(args)
-    cfg["algorithm"]["class_name"] = VirlPPO
-    cfg["multi_gpu"] = None
-    gen = torch.Generator().manual_seed(0)
-
-    class Env:
-        num_envs, num_actions, device = 16, 14, "cpu"
-
-        def get_observations(self) -> TensorDict:
-            return TensorDict({"policy": torch.zeros(16, 48), "privileged": torch.zeros(16, 8)}, batch_size=[16])
-
-    env = Env()
-    with contextlib.redirect_stdout(io.StringIO()):
-        alg = VirlPPO.construct_algorithm(env.get_observations(), env, cfg, "cpu")
-    alg.train_mode()
-    seen = []
-    for _ in range(cfg["num_steps_per_env"]):
-        obs = TensorDict({"policy": torch.randn(16, 48, generator=gen), "privileged": torch.randn(16, 8, generator=gen)},
-                         batch_size=[16])
-        seen.append(obs["policy"])
-        with torch.inference_mode():
-            alg.act(obs)
-            super(VirlPPO, alg).process_env_step(obs, torch.randn(16, generator=gen), torch.zeros(16),
-                                                 {"time_outs": torch.zeros(16)})
-    with torch.inference_mode():
-        super(VirlPPO, alg).compute_returns(obs)
-    batch = TensorDict({"policy": torch.cat(seen)}, batch_size=[len(seen) * 16])
+    env = _Env(envs=16, obs=48, actions=14, privileged=8)
+    alg = _ppo(args, env)
+    seen = _fill(alg, steps=args.ppo.steps_per_env, env=env)
+    batch = TensorDict({"policy": torch.cat(seen)}, batch_size=[sum(len(o) for o in seen)])
     with torch.no_grad():
         alg.actor(batch, stochastic_output=True)
         before = [p.clone() for p in alg.actor.output_distribution_params]
