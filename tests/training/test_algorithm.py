@@ -148,7 +148,8 @@ def test_the_first_actor_update_at_the_default_rate_keeps_the_policy_close():
     env = _Env(envs=16, obs=48, actions=14, privileged=8)
     alg = _ppo(args, env)
     seen = _fill(alg, steps=args.ppo.steps_per_env, env=env)
-    batch = TensorDict({"policy": torch.cat(seen)}, batch_size=[sum(len(o) for o in seen)])
+    seen = torch.cat(seen)
+    batch = TensorDict({"policy": seen}, batch_size=[len(seen)])
     with torch.no_grad():
         alg.actor(batch, stochastic_output=True)
         before = [p.clone() for p in alg.actor.output_distribution_params]

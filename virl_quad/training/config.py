@@ -126,8 +126,7 @@ class PPOOptions:
         "the actor's Adam learning rate at the start, then adapted to a KL target of 0.01 per update "
         "(within 1e-5 .. 1e-2; at std 0.05 it stays at 1e-5). Adam's first steps move every weight by "
         "about the rate whatever the gradient: a start far above where the schedule settles moves a "
-        "warm-started policy's mean by about one std in its first update, which PPO then spends about "
-        "100 iterations undoing")
+        "warm-started policy's mean by about one std in its first update, a setback PPO then has to undo")
     critic_learning_rate: float = opt(1e-3,
         "fixed Adam learning rate of the critic; the KL-adaptive rate is the actor's alone (at std 0.05 "
         "it sits at its 1e-5 floor, which would freeze a critic sharing it). 0: shared, as in rsl-rl")
