@@ -116,11 +116,16 @@ class QuadrupedEnv(gym.Env):
         self.rand = sample(self.dr, rng, self.robot)
         self.world.apply_params(self.rand.physics)
         self.demo_step = 0
-        if self.demo is not None:
+        ep = self.cfg.episode
+        standing = ep.stand_start > 0.0 and (ep.stand_start >= 1.0 or rng.random() < ep.stand_start)
+        if self.demo is not None and not standing:
             self.demo_step = int(rng.integers(self.demo.num_frames))
             if options and "demo_step" in options:
                 self.demo_step = int(options["demo_step"])
-        self._place_robot()
+        if standing:
+            self._stand()
+        else:
+            self._place_robot()
         self.steps = 0
         self._history.clear()
         self._state = self.world.state()
@@ -130,8 +135,16 @@ class QuadrupedEnv(gym.Env):
         hz = self.contract.clock_hz
         self.actions.reset(self._state.q, self.demo_step * self.robot.control_dt * hz if hz and self.demo else 0.0)
         self._remember(self._state)
-        self._next_push = self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
+        self._next_push = self.world.time + self.rand.push_interval if self.rand.push_velocity > 0 else np.inf
         return self._observation(), self._info()
+
+    def _stand(self) -> None:
+        """Start as a HAL hands the robot over: placed in the default pose, which the PD holds for
+        ``stand_seconds`` (the safety layer's ramp) before the policy's first action."""
+        self.world.reset()
+        hold = np.asarray(self.robot.default_pose, dtype=np.float64)
+        for _ in range(int(round(self.cfg.episode.stand_seconds / self.robot.control_dt))):
+            self.world.step(hold)
 
     def _place_robot(self) -> None:
         motion = self.demo.motion if self.demo is not None else None
