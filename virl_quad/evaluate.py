@@ -5,6 +5,8 @@
 Prints each score term, the total (aligned and at the best phase offset), the
 survival fraction and the forward-speed ratio to the demonstration, beside the
 same figures for holding the default pose (the baseline the policy must beat).
+Episodes start in the demonstration's states (``--start rsi``, how training scores the gait)
+or standing, as a HAL hands the robot over (``--start stand``: can the policy start the gait?).
 """
 
 from __future__ import annotations
@@ -34,6 +36,10 @@ def zero_policy(obs: dict) -> np.ndarray:
     return np.zeros(12)
 
 
+#: how an evaluation episode starts (``--start``), as the env's ``stand_start`` share
+STARTS = {"rsi": 0.0, "stand": 1.0}
+
+
 @dataclass
 class EvaluateArgs:
     """Options of ``python -m virl_quad.evaluate``."""
@@ -44,6 +50,9 @@ class EvaluateArgs:
     seconds: float = opt(10.0, "s per episode")
     seed: int = opt(0, "first episode seed")
     no_randomize: bool = opt(False, "evaluate without domain randomisation")
+    start: str = opt("rsi", "how episodes start: rsi (in the demonstration's states, at random phases: the "
+                            "gait itself) or stand (as a HAL hands the robot over: standing in the default "
+                            "pose, held 2 s, phase 0: starting the gait, as on hardware)", choices=tuple(STARTS))
     json: str = opt("", "write the figures to this JSON file")
     video: str = opt("", "write a side-by-side video of the first episode (.mp4)")
 
@@ -67,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     # whatever the robot spec's default is now
     actions = policy.contract.env_overrides()
     kwargs = dict(episodes=args.episodes, seed=args.seed, episode_seconds=args.seconds,
-                  randomize=not args.no_randomize, **actions)
+                  randomize=not args.no_randomize, stand_start=STARTS[args.start], **actions)
     result = evaluate(policy_callable(policy), robot, demo, **kwargs)
     baseline = evaluate(zero_policy, robot, demo, **{**kwargs, "tg": None})   # the default pose, not a TG
     keys = [k for k, v in result.items() if isinstance(v, (int, float))]

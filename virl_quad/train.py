@@ -83,7 +83,6 @@ def build(args: TrainArgs, run_dir: Path, resume_data: dict | None):
                           actor_prefix=f"{run_dir.name}-{os.getpid()}-",
                           seed=args.run.seed + 7919 * it0, device=args.run.device, demo=demo,
                           randomize=args.env.randomize, episode_seconds=args.env.episode_seconds,
-                          stand_start=args.env.stand_start,
                           oracle_reward=oracle, oracle_speed_weight=args.run.oracle_speed_weight,
                           ground=args.env.ground,
                           render=args.run.reward not in FRAMELESS_REWARDS,   # oracle, prior: no frames needed

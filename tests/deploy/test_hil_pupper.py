@@ -9,7 +9,8 @@ run independent of machine load: no assertion depends on wall-clock timing, only
     ``policies/pupper_trot_tracker_bc.pt``, the privileged tracker distilled by
     ``python -m virl_quad.distill``) drives the Pupper for 10 s of sim time: every
     applied command is safe, the robot stays up, and it moves forward, as far as it does in
-    the training env within a factor 2 (the deployment chain reproduces training)
+    the training env from the same standing start, within 25% (the deployment chain reproduces
+    training)
 (b) SIGKILL of the server -> DAMPING after 3 held periods (seen in STATUS); a restarted
     server drives the robot again only after a re-arm
 (c) E-stop (also with an undecodable payload) damps and latches; bad commands are counted
@@ -154,18 +155,21 @@ def test_policy_drives_pupper_10_s_safely_and_upright(drive):
 
 
 def _env_run(path) -> tuple[float, bool]:
-    """(forward distance m, fell?) of the policy in the training env, started as a HAL starts it:
-    standing in the default pose at demonstration phase 0, no randomisation."""
+    """(forward distance m, fell?) of the policy in the training env, started as the HAL starts it:
+    the env's standing start (the default pose held for the safety layer's ramp time, phase 0), no
+    randomisation. A start dropped from the spawn height instead can put a policy in another
+    limit cycle of its gait (one trot walked twice as far from it as from a stand)."""
     from virl_quad import demo as demo_lib
     from virl_quad import envs
     from virl_quad.evaluation.rollout import record_episode
     from virl_quad.policy_io import load_policy
 
     policy = load_policy(path)
-    env = envs.make("pupper", demo=demo_lib.load("trot", "pupper"), randomize=False, render=False, rsi=False,
-                    episode_seconds=DRIVE_SECONDS, **policy.contract.env_overrides())   # its own actions (TG)
+    env = envs.make("pupper", demo=demo_lib.load("trot", "pupper"), randomize=False, render=False,
+                    stand_start=1.0, stand_seconds=SafetyConfig().ramp_time, episode_seconds=DRIVE_SECONDS,
+                    **policy.contract.env_overrides())   # its own actions (TG)
     try:
-        obs, _ = env.reset(seed=0, options={"demo_step": 0})
+        obs, _ = env.reset(seed=0)
         traj, _, fell = record_episode(env, lambda o: policy.act(o["policy"]), obs)
     finally:
         env.close()
@@ -185,7 +189,7 @@ def test_shipped_policy_moves_forward_as_in_the_training_env(drive, policy):
     print(f"\nHIL: shipped policy {policy[0].name} moved {dx:+.3f} m in {DRIVE_SECONDS:g} s through HAL + server; "
           f"{dx_env:+.3f} m in the training env")
     assert dx > MIN_FORWARD, f"moved only {dx:.3f} m (want > {MIN_FORWARD} m)\n{logs}"
-    assert not fell and 0.5 < dx / dx_env < 2.0, f"HIL {dx:.3f} m against env {dx_env:.3f} m (fell {fell})"
+    assert not fell and 0.8 < dx / dx_env < 1.25, f"HIL {dx:.3f} m against env {dx_env:.3f} m (fell {fell})"
 
 
 # ----------------------------------------------------------------------------- (b) server killed

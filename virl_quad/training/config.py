@@ -64,9 +64,6 @@ class EnvOptions:
                                "on this machine; host:port; empty: start a local one)")
     episode_seconds: float = opt(10.0, "s, training episode time limit")
     randomize: bool = opt(True, "domain randomisation during training")
-    stand_start: float = opt(0.0,
-        "share of training episodes that start as a HAL hands the robot over: standing in the default "
-        "pose (held 2 s) at phase 0; the others start from the demonstration's states (RSI)")
     ground: str = opt(DEFAULT_GROUND,
         "ground the camera sees in demonstration renders and agent frames: checker (forward progress "
         "visible to a person) or plain; the distance model paints either white "
@@ -217,8 +214,6 @@ def validate(args: TrainArgs) -> None:
         raise ValueError(f"--reward-pretrain must be >= 0, got {args.distance.reward_pretrain}")
     if args.distance.adversarial_weight < 0:
         raise ValueError(f"--adversarial-weight must be >= 0, got {args.distance.adversarial_weight}")
-    if not 0 <= args.env.stand_start <= 1:
-        raise ValueError(f"--stand-start must lie in [0, 1], got {args.env.stand_start}")
     if args.run.minutes < 0 or args.env.episode_seconds <= 0 or args.eval.eval_seconds <= 0:
         raise ValueError("--minutes must be >= 0 and episode/eval seconds > 0")
     hidden_sizes(args)
