@@ -36,8 +36,8 @@ def zero_policy(obs: dict) -> np.ndarray:
     return np.zeros(12)
 
 
-#: how an evaluation episode starts (``--start``), as the env's ``stand_start`` share
-STARTS = {"rsi": 0.0, "stand": 1.0}
+#: how an evaluation episode starts (``--start``): the env's ``stand_start``
+STARTS = {"rsi": False, "stand": True}
 
 
 @dataclass

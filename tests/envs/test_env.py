@@ -213,30 +213,27 @@ def test_oracle_reward_is_the_score_against_the_reference_at_each_step() -> None
 
 
 def test_standing_start_hands_over_as_the_hal_does() -> None:
-    """stand_start=1: the robot stands at rest in (about) the default pose after the hold, the
-    clock at phase 0; a share of 0.5 mixes standing and RSI starts; a share outside [0, 1] fails."""
+    """stand_start: the robot stands at rest in (about) the default pose after the hold, the clock
+    at phase 0, under randomisation; without it the same seeds start from the demonstration."""
     from virl_quad import demo as demo_lib
     from virl_quad.policy.observation import policy_block
 
     spec = robots.get("pupper")
     demo = demo_lib.load("trot", "pupper")
-    env = make("pupper", demo=demo, render=False, stand_start=1.0, stand_seconds=2.0)   # randomised
-    u = env.unwrapped
-    phase = policy_block("phase_sin_cos", action_size=u.contract.action_size)
-    for seed in range(3):
-        obs, _ = env.reset(seed=seed)
-        s = u.world.state()
-        assert u.demo_step == 0 and u.world.time == pytest.approx(2.0)
-        np.testing.assert_allclose(obs["policy"][phase], [0.0, 1.0], atol=1e-6)
-        assert np.abs(s.dq).max() < 0.1 and np.abs(s.base_lin_vel).max() < 0.02          # rad/s, m/s: at rest
-        assert np.abs(s.q - spec.default_pose).max() < 0.2 and s.base_pos[2] > spec.min_base_height
-    env.close()
-    env = make("pupper", demo=demo, render=False, stand_start=0.5)
-    starts = set()
-    for seed in range(12):
-        env.reset(seed=seed)
-        starts.add(env.unwrapped.world.time > 0.0)
-    env.close()
-    assert starts == {True, False}
-    with pytest.raises(ValueError, match="stand_start"):
-        make("pupper", stand_start=1.5)
+    for stand in (True, False):
+        env = make("pupper", demo=demo, render=False, stand_start=stand, stand_seconds=2.0)   # randomised
+        u = env.unwrapped
+        phase = policy_block("phase_sin_cos", action_size=u.contract.action_size)
+        for seed in range(3):
+            obs, _ = env.reset(seed=seed)
+            s = u.world.state()
+            if not stand:       # RSI: mid-stride, somewhere in the demonstration
+                assert u.world.time == 0.0 and np.abs(s.dq).max() > 0.5
+                continue
+            assert u.demo_step == 0 and u.world.time == pytest.approx(2.0)
+            np.testing.assert_allclose(obs["policy"][phase], [0.0, 1.0], atol=1e-6)
+            assert np.abs(s.dq).max() < 0.1 and np.abs(s.base_lin_vel).max() < 0.02      # rad/s, m/s: at rest
+            assert np.abs(s.q - spec.default_pose).max() < 0.2 and s.base_pos[2] > spec.min_base_height
+        env.close()
+    with pytest.raises(ValueError, match="stand_seconds"):
+        make("pupper", stand_start=True, stand_seconds=-1.0)

@@ -29,9 +29,8 @@ class EpisodeConfig:
     time_limit: bool = True                # truncate at episode_seconds (the VecEnv does it itself)
     terminate_on_fall: bool = True         # end the episode when the robot falls
     rsi: bool = True                       # reference state initialisation when the demo has a motion
-    stand_start: float = 0.0               # share of episodes that start as a HAL hands a robot over:
-                                           # standing, the default pose held for stand_seconds, clock
-                                           # at phase 0 (the others: RSI, or as rsi says)
+    stand_start: bool = False              # start as a HAL hands a robot over: standing, the default
+                                           # pose held for stand_seconds, clock at phase 0 (not RSI)
     stand_seconds: float = 2.0             # s, the hold before a standing start (the deploy safety
                                            # layer's ramp_time)
 
@@ -148,9 +147,8 @@ def checked(spec: RobotSpec, cfg: EnvConfig) -> tuple[RobotSpec, ActionMap]:
                          f"{spec.control_hz:.3f} Hz; re-render or import it for this robot")
     if cfg.oracle_reward and (demo is None or demo.motion is None):
         raise ValueError("oracle_reward needs a demonstration with a reference motion")
-    if not 0.0 <= cfg.episode.stand_start <= 1.0 or cfg.episode.stand_seconds < 0.0:
-        raise ValueError(f"stand_start must lie in [0, 1] and stand_seconds be >= 0, got "
-                         f"{cfg.episode.stand_start} and {cfg.episode.stand_seconds}")
+    if cfg.episode.stand_seconds < 0.0:
+        raise ValueError(f"stand_seconds must be >= 0, got {cfg.episode.stand_seconds}")
     if not 0.0 <= cfg.oracle_speed_weight <= 1.0:
         raise ValueError(f"oracle_speed_weight must lie in [0, 1], got {cfg.oracle_speed_weight}")
     contract = policy_contract(spec, cfg, demo.num_frames if demo is not None else None)

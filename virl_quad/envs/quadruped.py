@@ -110,14 +110,14 @@ class QuadrupedEnv(gym.Env):
 
     # -- episode ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Start an episode: draw the randomisation, place the robot (RSI with a demo)."""
+        """Start an episode: draw the randomisation, place the robot (RSI with a demo; standing
+        with ``stand_start``)."""
         super().reset(seed=seed)
         rng = self.np_random
         self.rand = sample(self.dr, rng, self.robot)
         self.world.apply_params(self.rand.physics)
         self.demo_step = 0
-        ep = self.cfg.episode
-        standing = ep.stand_start > 0.0 and (ep.stand_start >= 1.0 or rng.random() < ep.stand_start)
+        standing = self.cfg.episode.stand_start
         if self.demo is not None and not standing:
             self.demo_step = int(rng.integers(self.demo.num_frames))
             if options and "demo_step" in options:
