@@ -166,7 +166,7 @@ def _env_run(path) -> tuple[float, bool]:
 
     policy = load_policy(path)
     env = envs.make("pupper", demo=demo_lib.load("trot", "pupper"), randomize=False, render=False,
-                    stand_start=True, stand_seconds=SafetyConfig().ramp_time, episode_seconds=DRIVE_SECONDS,
+                    stand_start=True, episode_seconds=DRIVE_SECONDS,
                     **policy.contract.env_overrides())   # its own actions (TG)
     try:
         obs, _ = env.reset(seed=0)

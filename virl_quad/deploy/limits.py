@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from virl_quad.deploy.protocol import NUM_JOINTS, JointCommand, RobotState
-from virl_quad.robots.spec import MAX_TARGET_STEP
+from virl_quad.robots.spec import MAX_TARGET_STEP, RAMP_TIME
 
 _EPS = 1e-9
 
@@ -23,7 +23,7 @@ _EPS = 1e-9
 class SafetyConfig:
     """Tunables of the safety layer (the watchdog and the step limit count control periods)."""
 
-    ramp_time: float = 2.0             # s, from the current pose to the default pose
+    ramp_time: float = RAMP_TIME       # s, from the current pose to the default pose
     watchdog_periods: int = 3          # ACTIVE: more periods than this without a valid command -> DAMPING
     max_step: float = MAX_TARGET_STEP  # rad per control period, change of an applied target (as in training)
     gain_factor: float = 2.0           # kp, kd at most gain_factor x the spec gains

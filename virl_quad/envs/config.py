@@ -16,7 +16,7 @@ from virl_quad.envs.randomize import DRConfig
 from virl_quad.policy.action import ActionMap
 from virl_quad.policy.contract import PolicyContract
 from virl_quad.policy.tg import TGParams
-from virl_quad.robots.spec import MAX_TARGET_STEP, RobotSpec
+from virl_quad.robots.spec import MAX_TARGET_STEP, RAMP_TIME, RobotSpec
 from virl_quad.sim.params import DEFAULT_GROUND
 from virl_quad.sim.pd import PD_MODES
 
@@ -31,8 +31,8 @@ class EpisodeConfig:
     rsi: bool = True                       # reference state initialisation when the demo has a motion
     stand_start: bool = False              # start as a HAL hands a robot over: standing, the default
                                            # pose held for stand_seconds, clock at phase 0 (not RSI)
-    stand_seconds: float = 2.0             # s, the hold before a standing start (the deploy safety
-                                           # layer's ramp_time)
+    stand_seconds: float = RAMP_TIME       # s, the hold before a standing start (the deploy safety
+                                           # layer's ramp time)
 
 
 @dataclass

@@ -19,6 +19,9 @@ LEGS: tuple[str, ...] = ("FR", "FL", "RR", "RL")
 #: rad per control period: the largest change of a PD target. The env applies it in training
 #: and the deploy safety layer on the robot, so a policy meets the same limit in both.
 MAX_TARGET_STEP = 0.2
+#: s: the deploy safety layer ramps to the default pose and holds it this long before a policy
+#: drives; the env's standing start holds it as long, so a policy meets the same handover.
+RAMP_TIME = 2.0
 JOINT_KINDS: tuple[str, ...] = ("abduction", "hip", "knee")
 NUM_JOINTS: int = 12
 
