@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from virl_quad.cli import UserError, opt, parse, run_main
+from virl_quad.robots.spec import RAMP_TIME
 
 if TYPE_CHECKING:                                  # torch loads only once the options are good
     from virl_quad.policy_io import LoadedPolicy
@@ -52,7 +53,8 @@ class EvaluateArgs:
     no_randomize: bool = opt(False, "evaluate without domain randomisation")
     start: str = opt("rsi", "how episodes start: rsi (in the demonstration's states, at random phases: the "
                             "gait itself) or stand (as a HAL hands the robot over: standing in the default "
-                            "pose, held 2 s, phase 0: starting the gait, as on hardware)", choices=tuple(STARTS))
+                            f"pose, held {RAMP_TIME:g} s, phase 0: starting the gait, as on hardware)",
+                     choices=tuple(STARTS))
     json: str = opt("", "write the figures to this JSON file")
     video: str = opt("", "write a side-by-side video of the first episode (.mp4)")
 

@@ -117,14 +117,13 @@ class QuadrupedEnv(gym.Env):
         self.rand = sample(self.dr, rng, self.robot)
         self.world.apply_params(self.rand.physics)
         self.demo_step = 0
-        standing = self.cfg.episode.stand_start
-        if self.demo is not None and not standing:
-            self.demo_step = int(rng.integers(self.demo.num_frames))
-            if options and "demo_step" in options:
-                self.demo_step = int(options["demo_step"])
-        if standing:
+        if self.cfg.episode.stand_start:
             self._stand()
         else:
+            if self.demo is not None:
+                self.demo_step = int(rng.integers(self.demo.num_frames))
+                if options and "demo_step" in options:
+                    self.demo_step = int(options["demo_step"])
             self._place_robot()
         self.steps = 0
         self._history.clear()
