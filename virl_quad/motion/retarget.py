@@ -20,18 +20,7 @@ from scipy.spatial.transform import Rotation
 from virl_quad import robots
 from virl_quad.motion.gaits import world_to_base
 from virl_quad.motion.motion import Motion
-
-
-def leg_length(kin) -> float:
-    """Mean leg length (m) of a :class:`~virl_quad.kinematics.Kinematics`: hip pitch -> knee -> foot."""
-    pin.framesForwardKinematics(kin.model, kin.data, kin.q_pin(q12=np.zeros(12)))
-    total = 0.0
-    for leg in range(4):
-        hip = kin.data.oMi[int(kin.joint_ids[3 * leg + 1])].translation
-        knee = kin.data.oMi[int(kin.joint_ids[3 * leg + 2])].translation
-        foot = kin.data.oMf[kin.foot_frame_ids[leg]].translation
-        total += np.linalg.norm(knee - hip) + np.linalg.norm(foot - knee)
-    return total / 4.0
+from virl_quad.policy.legs import leg_length
 
 
 def retarget_with_residual(motion: Motion, target: str, source: str | None = None) -> tuple[Motion, np.ndarray]:
@@ -46,7 +35,7 @@ def retarget_with_residual(motion: Motion, target: str, source: str | None = Non
         raise ValueError("retargeting needs the source robot (motion.robot is empty)")
     src_spec, tgt_spec = robots.get(source), robots.get(target)
     src, tgt = Kinematics(src_spec), Kinematics(tgt_spec)
-    k = leg_length(tgt) / leg_length(src)
+    k = leg_length(tgt_spec) / leg_length(src_spec)                               # stride scale
     hips_s, hips_t = src.hip_positions(), tgt.hip_positions()                      # (4, 3) base frame
     spot_s = src.foot_positions(None, None, src_spec.default_pose) - hips_s        # default foot - hip
     spot_t = tgt.foot_positions(None, None, tgt_spec.default_pose) - hips_t

@@ -66,6 +66,16 @@ class StreamState:
         return StreamState(self.h, self.c, self.prev, self.fresh | mask.to(self.fresh.device))
 
 
+def _pack_rnn_weights(module: nn.Module) -> None:
+    """Lay each LSTM's weights of ``module`` out as one block, cuDNN's layout. Moved to a GPU or
+    deep-copied there, they are separate tensors, and every call repacks them (torch warns "RNN
+    module weights are not part of single contiguous chunk of memory"). A no-op on the CPU. Later
+    in-place updates (optimiser steps, the EMA, load_state_dict) keep the layout."""
+    for m in module.modules():
+        if isinstance(m, nn.RNNBase):
+            m.flatten_parameters()
+
+
 @contextlib.contextmanager
 def eval_mode(module: nn.Module):
     """Run a block with ``module`` in eval mode and without gradients, then restore its mode."""
@@ -94,6 +104,8 @@ class RewardModel:
             torch.manual_seed(self.seed)
             self.net = self._build_net().to(self.device).eval()
         self.reward_net = copy.deepcopy(self.net) if cfg.optim.ema > 0 else self.net   # what rewards come from
+        for net in (self.net, self.reward_net):
+            _pack_rnn_weights(net)
         self.trainer = Trainer(self.net, self._loss, cfg.optim.lr, cfg.optim.grad_clip, self.seed)
 
     # -- to be provided by a variant ---------------------------------------------------------
