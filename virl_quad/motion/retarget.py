@@ -14,7 +14,6 @@ starting from the previous solution.
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from virl_quad import robots
