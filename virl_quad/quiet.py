@@ -8,6 +8,7 @@ errors, so these go to /dev/null.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import sys
 from collections.abc import Iterator
@@ -37,4 +38,4 @@ def import_pybullet_quietly() -> None:
     if "pybullet" in sys.modules:
         return
     with quiet_fd(1), quiet_fd(2):
-        import pybullet  # noqa: F401
+        importlib.import_module("pybullet")
