@@ -98,6 +98,26 @@ def test_a_variant_moves_the_hind_feet_back_scales_swing_and_step_and_must_stay_
         with_variant(PUPPER, _trot(), 0.5, 1.0)                          # hind feet half a metre back
 
 
+def test_a_crouched_variant_lowers_every_foot_and_stays_in_reach() -> None:
+    from virl_quad.training.prior_check import GAIT_VARIANTS, describe_variant, with_variant
+
+    dog = TGParams(frequency=1.85, offsets=(0.0, 0.5, 0.5, 0.0), duty=0.4, step_length=0.054,   # the dog video's
+                   swing_height=0.015, stance_height=0.14)                                        # fit, slowed
+    crouched = with_variant(PUPPER, dog, 0.01, 2.0, 1.0, 0.8)
+    assert crouched.stance_height == pytest.approx(0.8 * dog.stance_height)
+    z_before = TrajectoryGenerator(PUPPER, dog).foot_positions(0.0)[:, 2]
+    z_after = TrajectoryGenerator(PUPPER, crouched).foot_positions(0.0)[:, 2]
+    assert z_after[[0, 3]] == pytest.approx(z_before[[0, 3]] + 0.2 * dog.stance_height)  # stance feet nearer the hips
+    for variant in GAIT_VARIANTS:                                        # every variant reaches with these fits' gaits
+        for tg in (dog, _video_pace()):
+            with_variant(PUPPER, tg, *variant)
+    assert describe_variant({"hind_back_m": 0.01, "swing_scale": 2.0, "step_scale": 1.0, "stance_scale": 0.8}) \
+        == "hind feet 1.0 cm back, swing x2, step x1, stance x0.8"
+    assert "stance" not in describe_variant({"hind_back_m": 0.01, "swing_scale": 2.0, "step_scale": 1.0})
+    with pytest.raises(ValueError):
+        with_variant(PUPPER, dog, 0.0, 1.0, 1.0, 0.2)                    # feet 3 cm under the hips: out of reach
+
+
 def test_a_teacher_that_travels_the_video_s_way_fast_enough_keeps_its_gait(demo) -> None:
     from virl_quad.training.prior_check import MIN_SPEED_SHARE, nominal_speed, pick_variant
 

@@ -121,7 +121,8 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     kept = TGParams.from_dict(fit["finalists"][fit["kept_finalist"]]["tg"])
     if fit["variant"] is not None:   # its teacher went against the video's ground, or too slowly: a variant
         v = fit["variant"]
-        kept = with_variant(robots.get("pupper"), kept, v["hind_back_m"], v["swing_scale"], v["step_scale"])
+        kept = with_variant(robots.get("pupper"), kept, v["hind_back_m"], v["swing_scale"], v["step_scale"],
+                            v["stance_scale"])
         assert "hind feet" in p.stdout and any(r.get("kept") for r in fit["travel_check"])
     assert TGParams.from_dict(fit["tg"]) == kept
     # the oracle's run has no anchor (pull 0): a pull typed on resume has nothing to pull towards

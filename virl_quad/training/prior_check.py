@@ -122,28 +122,40 @@ def slowed_to_carry(spec: RobotSpec, demo, finalists: list[TGParams], steps: int
 MIN_SPEED_SHARE = 1.0 / 3.0
 
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
-#: feet move towards the tail, factor on the swing height, factor on the step length). The pace
-#: fitted to the built-in video (swing 1.5 cm) drifts backwards, and walks forwards with its hind
-#: feet 2 cm back and 3 cm of swing; the fitted bound (step 5 cm, swing 3 cm) goes twice as far
-#: with a 7.5 cm step, 1.5-2 cm of swing and its hind feet 2-3 cm back (docs/experiments.md).
-GAIT_VARIANTS = ((0.01, 1.0, 1.0), (0.02, 1.0, 1.0), (0.0, 2.0, 1.0), (0.01, 2.0, 1.0), (0.02, 2.0, 1.0),
-                 (0.02, 0.67, 1.5), (0.03, 0.5, 1.5))
+#: feet move towards the tail, factor on the swing height, factor on the step length, factor on the
+#: stance height). The pace fitted to the built-in video (swing 1.5 cm) drifts backwards, and walks
+#: forwards with its hind feet 2 cm back and 3 cm of swing; the fitted bound (step 5 cm, swing 3 cm)
+#: goes twice as far with a 7.5 cm step, 1.5-2 cm of swing and its hind feet 2-3 cm back. A crouch
+#: (stance x0.8: 0.11 m on Pupper) keeps the dog video's trot walking on grippy ground, where at
+#: the full stance its loaded hind feet drag through their swing (docs/experiments.md).
+GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0), (0.02, 1.0, 1.0, 1.0), (0.0, 2.0, 1.0, 1.0), (0.01, 2.0, 1.0, 1.0),
+                 (0.02, 2.0, 1.0, 1.0), (0.02, 0.67, 1.5, 1.0), (0.03, 0.5, 1.5, 1.0),
+                 (0.0, 1.0, 1.0, 0.8), (0.01, 1.0, 1.0, 0.8), (0.01, 2.0, 1.0, 0.8), (0.02, 2.0, 1.0, 0.8))
 
 
 def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float,
-                 step_scale: float = 1.0) -> TGParams:
+                 step_scale: float = 1.0, stance_scale: float = 1.0) -> TGParams:
     """``tg`` with its hind neutral feet ``hind_back`` m towards the tail, its swing height times
-    ``swing_scale`` and its step length times ``step_scale`` (ValueError when a foot then leaves
-    the leg's reach)."""
+    ``swing_scale``, its step length times ``step_scale`` and its stance height (feet below the
+    hips, m) times ``stance_scale`` (ValueError when a foot then leaves the leg's reach)."""
     from virl_quad.policy.tg import TrajectoryGenerator
 
     xy = TrajectoryGenerator(spec, tg).neutral_xy.copy()
     xy[2:, 0] -= hind_back                                 # legs FR, FL, RR, RL: the last two are hind
     moved = TGParams.from_dict({**tg.to_dict(), "neutral_xy": xy.tolist(),
                                 "swing_height": tg.swing_height * swing_scale,
-                                "step_length": tg.step_length * step_scale})
+                                "step_length": tg.step_length * step_scale,
+                                "stance_height": tg.stance_height * stance_scale})
     TrajectoryGenerator(spec, moved)                       # reach and joint limits checked
     return moved
+
+
+def describe_variant(variant: dict) -> str:
+    """One phrase for a :data:`GAIT_VARIANTS` entry as a report row names it (``hind_back_m``,
+    ``swing_scale``, ``step_scale``, ``stance_scale``; a missing stance factor is 1)."""
+    stance = variant.get("stance_scale", 1.0)
+    return (f"hind feet {variant['hind_back_m'] * 100:.1f} cm back, swing x{variant['swing_scale']:g}, step "
+            f"x{variant['step_scale']:g}" + (f", stance x{stance:g}" if stance != 1.0 else ""))
 
 
 def nominal_speed(tg: TGParams) -> float:
@@ -169,16 +181,16 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
         return tg, []
     allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
     best, best_travel, best_row, rows = tg, trial["travel_m"] * direction, None, []
-    for hind_back, swing_scale, step_scale in GAIT_VARIANTS:
+    for hind_back, swing_scale, step_scale, stance_scale in GAIT_VARIANTS:
         try:
-            moved = with_variant(spec, tg, hind_back, swing_scale, step_scale)
+            moved = with_variant(spec, tg, hind_back, swing_scale, step_scale, stance_scale)
         except ValueError:
             continue
         row = {"hind_back_m": hind_back, "swing_scale": swing_scale, "step_scale": step_scale,
-               **teacher_trial(spec, demo, moved, steps, seed, randomize)}
+               "stance_scale": stance_scale, **teacher_trial(spec, demo, moved, steps, seed, randomize)}
         rows.append(row)
-        log(f"  hind feet {hind_back * 100:.1f} cm back, swing x{swing_scale:g}, step x{step_scale:g}: its tracker "
-            f"fell in {row['falls']} of {row['episodes']} episodes, mean travel {row['travel_m']:+.2f} m")
+        log(f"  {describe_variant(row)}: its tracker fell in {row['falls']} of {row['episodes']} episodes, "
+            f"mean travel {row['travel_m']:+.2f} m")
         if row["fall_rate"] <= allowed and row["travel_m"] * direction > best_travel:
             best, best_travel, best_row = moved, row["travel_m"] * direction, row
     for r in rows:
@@ -205,5 +217,5 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
                                                  randomize, log)
     kept = next((r for r in report["travel_check"] if r.get("kept")), None)
     if kept is not None:
-        report["variant"] = {k: kept[k] for k in ("hind_back_m", "swing_scale", "step_scale")}
+        report["variant"] = {k: kept[k] for k in ("hind_back_m", "swing_scale", "step_scale", "stance_scale")}
     return moved

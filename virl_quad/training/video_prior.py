@@ -57,6 +57,7 @@ from virl_quad.policy.legs import leg_length
 from virl_quad.policy.tg import TGParams
 from virl_quad.reward.frames import dark_level
 from virl_quad.robots.spec import RobotSpec
+from virl_quad.training.prior_check import describe_variant
 from virl_quad.training.synthesis import RenderPool
 
 GAIT_BAND = (0.5, 5.0)      # Hz, where the gait frequency is looked for
@@ -314,9 +315,8 @@ def describe(params: TGParams, report: dict) -> str:
                "episodes" if report.get("kept_finalist") else "")
             + (f"; slowed to {report['slowed_to_mps']:.2f} m/s: at the video's speed its tracker fell in more than "
                "half its episodes" if report.get("slowed_to_mps") else "")
-            + (f"; hind feet {report['variant']['hind_back_m'] * 100:.1f} cm back, swing x"
-               f"{report['variant']['swing_scale']:g}, step x{report['variant']['step_scale']:g}: "
-               "its tracker travels further the way the video's ground slides" if report.get("variant") else ""))
+            + (f"; {describe_variant(report['variant'])}: its tracker travels further the way the video's "
+               "ground slides" if report.get("variant") else ""))
 
 
 def save_fit_sheet(video: np.ndarray, fitted: np.ndarray, path: str | os.PathLike, fps: float = 0.0,
