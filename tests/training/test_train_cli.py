@@ -108,7 +108,7 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     from virl_quad.deploy.serve import PolicyRunner
     from virl_quad.policy.tg import TGParams
     from virl_quad.training.prior import gait_tg
-    from virl_quad.training.prior_check import with_variant
+    from virl_quad.training.prior_check import VARIANT_KEYS, with_variant
 
     run_dir = tmp_path / "run"
     p = run("virl_quad.train", "--robot", "pupper", "--tg", "--reward", "oracle", "--iterations", "1",
@@ -120,9 +120,7 @@ def test_tiny_tg_run_exports_and_serves(tmp_path: Path) -> None:
     assert "physics check, finalist 0" in p.stdout and fit["physics_check"][0]["episodes"] >= 1
     kept = TGParams.from_dict(fit["finalists"][fit["kept_finalist"]]["tg"])
     if fit["variant"] is not None:   # its teacher went against the video's ground, or too slowly: a variant
-        v = fit["variant"]
-        kept = with_variant(robots.get("pupper"), kept, v["hind_back_m"], v["swing_scale"], v["step_scale"],
-                            v["stance_scale"])
+        kept = with_variant(robots.get("pupper"), kept, *(fit["variant"][k] for k in VARIANT_KEYS))
         assert "hind feet" in p.stdout and any(r.get("kept") for r in fit["travel_check"])
     assert TGParams.from_dict(fit["tg"]) == kept
     # the oracle's run has no anchor (pull 0): a pull typed on resume has nothing to pull towards

@@ -131,6 +131,8 @@ MIN_SPEED_SHARE = 1.0 / 3.0
 GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0), (0.02, 1.0, 1.0, 1.0), (0.0, 2.0, 1.0, 1.0), (0.01, 2.0, 1.0, 1.0),
                  (0.02, 2.0, 1.0, 1.0), (0.02, 0.67, 1.5, 1.0), (0.03, 0.5, 1.5, 1.0),
                  (0.0, 1.0, 1.0, 0.8), (0.01, 1.0, 1.0, 0.8), (0.01, 2.0, 1.0, 0.8), (0.02, 2.0, 1.0, 0.8))
+#: The names of a variant's four entries, as the travel check's rows and the fit's report keep them.
+VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale")
 
 
 def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float,
@@ -181,13 +183,12 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
         return tg, []
     allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
     best, best_travel, best_row, rows = tg, trial["travel_m"] * direction, None, []
-    for hind_back, swing_scale, step_scale, stance_scale in GAIT_VARIANTS:
+    for variant in GAIT_VARIANTS:
         try:
-            moved = with_variant(spec, tg, hind_back, swing_scale, step_scale, stance_scale)
+            moved = with_variant(spec, tg, *variant)
         except ValueError:
             continue
-        row = {"hind_back_m": hind_back, "swing_scale": swing_scale, "step_scale": step_scale,
-               "stance_scale": stance_scale, **teacher_trial(spec, demo, moved, steps, seed, randomize)}
+        row = {**dict(zip(VARIANT_KEYS, variant)), **teacher_trial(spec, demo, moved, steps, seed, randomize)}
         rows.append(row)
         log(f"  {describe_variant(row)}: its tracker fell in {row['falls']} of {row['episodes']} episodes, "
             f"mean travel {row['travel_m']:+.2f} m")
@@ -217,5 +218,5 @@ def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: in
                                                  randomize, log)
     kept = next((r for r in report["travel_check"] if r.get("kept")), None)
     if kept is not None:
-        report["variant"] = {k: kept[k] for k in ("hind_back_m", "swing_scale", "step_scale", "stance_scale")}
+        report["variant"] = {k: kept[k] for k in VARIANT_KEYS}
     return moved
