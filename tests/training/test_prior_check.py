@@ -96,6 +96,10 @@ def test_a_variant_moves_the_hind_feet_back_scales_swing_and_step_and_must_stay_
     assert moved.step_length == pytest.approx(1.5 * _trot().step_length)
     with pytest.raises(ValueError):
         with_variant(PUPPER, _trot(), 0.5, 1.0)                          # hind feet half a metre back
+    wide = TrajectoryGenerator(PUPPER, with_variant(PUPPER, _trot(), 0.0, 1.0, 1.0, 1.0, 0.03)).neutral_xy
+    assert wide[:, 0] == pytest.approx(before[:, 0])
+    assert np.abs(wide[:, 1]) == pytest.approx(np.abs(before[:, 1]) + 0.03)  # every foot 3 cm further out
+    assert np.sign(wide[:, 1]) == pytest.approx(np.sign(before[:, 1]))
 
 
 def test_a_crouched_variant_lowers_every_foot_and_stays_in_reach() -> None:
@@ -114,6 +118,8 @@ def test_a_crouched_variant_lowers_every_foot_and_stays_in_reach() -> None:
     assert describe_variant({"hind_back_m": 0.01, "swing_scale": 2.0, "step_scale": 1.0, "stance_scale": 0.8}) \
         == "hind feet 1.0 cm back, swing x2, step x1, stance x0.8"
     assert "stance" not in describe_variant({"hind_back_m": 0.01, "swing_scale": 2.0, "step_scale": 1.0})
+    assert describe_variant({"hind_back_m": 0.02, "swing_scale": 2.0, "step_scale": 1.5, "stance_scale": 0.8,
+                             "widen_m": 0.04}).endswith("stance x0.8, feet 4.0 cm wider")
     with pytest.raises(ValueError):
         with_variant(PUPPER, dog, 0.0, 1.0, 1.0, 0.2)                    # feet 3 cm under the hips: out of reach
 

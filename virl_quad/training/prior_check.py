@@ -123,29 +123,33 @@ MIN_SPEED_SHARE = 1.0 / 3.0
 
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
 #: feet move towards the tail, factor on the swing height, factor on the step length, factor on the
-#: stance height). The pace fitted to the built-in video (swing 1.5 cm) drifts backwards, and walks
-#: forwards with its hind feet 2 cm back and 3 cm of swing; the fitted bound (step 5 cm, swing 3 cm)
-#: goes twice as far with a 7.5 cm step, 1.5-2 cm of swing and its hind feet 2-3 cm back. A crouch
-#: (stance x0.8: 0.11 m on Pupper) keeps the dog video's trot walking on grippy ground, where at
-#: the full stance its loaded hind feet drag through their swing; crouched, it also carries a
-#: longer step (x1.2), which at the full stance falls (docs/experiments.md).
-GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0), (0.02, 1.0, 1.0, 1.0), (0.0, 2.0, 1.0, 1.0), (0.01, 2.0, 1.0, 1.0),
-                 (0.02, 2.0, 1.0, 1.0), (0.02, 0.67, 1.5, 1.0), (0.03, 0.5, 1.5, 1.0),
-                 (0.0, 1.0, 1.0, 0.8), (0.01, 1.0, 1.0, 0.8), (0.01, 2.0, 1.0, 0.8), (0.02, 2.0, 1.0, 0.8),
-                 (0.02, 2.0, 1.2, 0.8))
-#: The names of a variant's four entries, as the travel check's rows and the fit's report keep them.
-VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale")
+#: stance height, m every foot moves outwards). The pace fitted to the built-in video (swing 1.5 cm)
+#: drifts backwards, and walks forwards with its hind feet 2 cm back and 3 cm of swing; the fitted
+#: bound (step 5 cm, swing 3 cm) goes twice as far with a 7.5 cm step, 1.5-2 cm of swing and its
+#: hind feet 2-3 cm back. A crouch (stance x0.8: 0.11 m on Pupper) keeps the dog video's trot
+#: walking on grippy ground, where at the full stance its loaded hind feet drag through their
+#: swing; crouched, it carries a longer step (x1.2), which at the full stance falls; with its feet
+#: also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md).
+GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0, 0.0), (0.02, 1.0, 1.0, 1.0, 0.0), (0.0, 2.0, 1.0, 1.0, 0.0),
+                 (0.01, 2.0, 1.0, 1.0, 0.0), (0.02, 2.0, 1.0, 1.0, 0.0), (0.02, 0.67, 1.5, 1.0, 0.0),
+                 (0.03, 0.5, 1.5, 1.0, 0.0), (0.0, 1.0, 1.0, 0.8, 0.0), (0.01, 1.0, 1.0, 0.8, 0.0),
+                 (0.01, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.2, 0.8, 0.0),
+                 (0.02, 2.0, 1.5, 0.8, 0.04))
+#: The names of a variant's five entries, as the travel check's rows and the fit's report keep them.
+VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale", "widen_m")
 
 
 def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float,
-                 step_scale: float = 1.0, stance_scale: float = 1.0) -> TGParams:
+                 step_scale: float = 1.0, stance_scale: float = 1.0, widen: float = 0.0) -> TGParams:
     """``tg`` with its hind neutral feet ``hind_back`` m towards the tail, its swing height times
-    ``swing_scale``, its step length times ``step_scale`` and its stance height (feet below the
-    hips, m) times ``stance_scale`` (ValueError when a foot then leaves the leg's reach)."""
+    ``swing_scale``, its step length times ``step_scale``, its stance height (feet below the
+    hips, m) times ``stance_scale`` and every neutral foot ``widen`` m further out sideways
+    (ValueError when a foot then leaves the leg's reach or joint limits)."""
     from virl_quad.policy.tg import TrajectoryGenerator
 
     xy = TrajectoryGenerator(spec, tg).neutral_xy.copy()
     xy[2:, 0] -= hind_back                                 # legs FR, FL, RR, RL: the last two are hind
+    xy[:, 1] += widen * np.sign(xy[:, 1])                  # m, away from the body's midline
     moved = TGParams.from_dict({**tg.to_dict(), "neutral_xy": xy.tolist(),
                                 "swing_height": tg.swing_height * swing_scale,
                                 "step_length": tg.step_length * step_scale,
@@ -156,10 +160,12 @@ def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: f
 
 def describe_variant(variant: dict) -> str:
     """One phrase for a :data:`GAIT_VARIANTS` entry as a report row names it (``hind_back_m``,
-    ``swing_scale``, ``step_scale``, ``stance_scale``; a missing stance factor is 1)."""
-    stance = variant.get("stance_scale", 1.0)
+    ``swing_scale``, ``step_scale``, ``stance_scale``, ``widen_m``; a missing stance factor is 1,
+    a missing widening 0)."""
+    stance, widen = variant.get("stance_scale", 1.0), variant.get("widen_m", 0.0)
     return (f"hind feet {variant['hind_back_m'] * 100:.1f} cm back, swing x{variant['swing_scale']:g}, step "
-            f"x{variant['step_scale']:g}" + (f", stance x{stance:g}" if stance != 1.0 else ""))
+            f"x{variant['step_scale']:g}" + (f", stance x{stance:g}" if stance != 1.0 else "")
+            + (f", feet {widen * 100:.1f} cm wider" if widen else ""))
 
 
 def nominal_speed(tg: TGParams) -> float:
