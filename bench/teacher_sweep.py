@@ -6,12 +6,14 @@
 
 Every combination of the factors (frequency scale, step length scale, swing height scale, hind
 feet moved towards the tail, m; duty factor, with the step length scaled alike so that the
-stance feet keep their speed; stance height scale; every foot moved outwards, m) applied to the TG in ``--tg`` (a run's ``prior_fit.json`` or any
-JSON with a ``tg`` entry; default: the robot's gait of the demonstration's name), each run as the
-warm start's first round gathers (``virl_quad.training.prior_check.teacher_trial``: observed joint
-angles, gathering noise, domain randomisation) for ``--steps`` control steps per seed, in a pool
-of ``--workers`` processes. Prints one row per variant, furthest travel first: falls, episodes,
-mean forward travel per episode (m; episodes of up to 10 s) and forward speed over the time run (m/s). The variants' throughput scales with cores: one process per variant.
+stance feet keep their speed; stance height scale; every foot moved outwards, m) applied to the
+TG in ``--tg`` (a run's ``prior_fit.json`` or any JSON with a ``tg`` entry; default: the robot's
+gait of the demonstration's name), each run as the warm start's first round gathers
+(``virl_quad.training.prior_check.teacher_trial``: observed joint angles, gathering noise,
+domain randomisation) for ``--steps`` control steps per seed, in a pool of ``--workers``
+processes. Prints one row per variant, furthest travel first: falls, episodes, mean forward
+travel per episode (m; episodes of up to 10 s) and forward speed over the time run (m/s). The
+variants' throughput scales with cores: one process per variant.
 """
 
 from __future__ import annotations

@@ -19,9 +19,9 @@ When none does and the video's gait is faster than the robot's built-in trot,
 
 :func:`gait_for_travel` then checks how fast, and which way, the kept finalist's teacher travels.
 A side view at 48 px fixes the phase pattern, period and step well, but not what makes a gait
-carry a Pupper forwards on the physics robot: its hind feet's fore-aft place, how high the feet
-clear the ground while the body rocks, and how long a step the legs can push through. When the
-teacher travels against the way the video's ground slides
+carry a Pupper forwards on the physics robot: its hind feet's fore-aft place, how wide apart
+the feet stand, how high they clear the ground while the body rocks, and how long a step the
+legs can push through. When the teacher travels against the way the video's ground slides
 (:func:`virl_quad.reward.egomotion.clip_speed`), or at under :data:`MIN_SPEED_SHARE` of the
 gait's own speed (step length x frequency / duty), the :data:`GAIT_VARIANTS` are tried and the
 one whose teacher goes furthest the video's way, falling in at most half its episodes (or no
