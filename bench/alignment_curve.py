@@ -1,6 +1,6 @@
 """A run's learned-reward alignment and ground-truth score against env steps (run by hand).
 
-    python bench/alignment_curve.py RUN_DIR [--out alignment.png] [--bar 0.6]
+    python bench/alignment_curve.py RUN_DIR [--out RUN_DIR/alignment.png] [--bar 0.6]
 
 Reads the run's ``evaluations.jsonl`` (written at every evaluation of ``python -m
 virl_quad.train`` with a learned reward and ``--alignment-probe``, the default): prints one row
@@ -27,9 +27,10 @@ def main() -> int:
     """Print the table, write the PNG."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("run_dir", type=Path, help="training run folder")
-    p.add_argument("--out", default="alignment.png", help="PNG to write")
+    p.add_argument("--out", type=Path, default=None, help="PNG to write (default: alignment.png in the run folder)")
     p.add_argument("--bar", type=float, default=0.6, help="rank correlation every probe should reach")
     a = p.parse_args()
+    out = a.out or a.run_dir / "alignment.png"
     path = a.run_dir / "evaluations.jsonl"
     if not path.exists():
         print(f"error: {path} not found", file=sys.stderr)
@@ -66,8 +67,8 @@ def main() -> int:
     ax.legend(loc="center right", fontsize="small")
     ax.set_title(f"{a.run_dir.name}: learned reward alignment and ground-truth score")
     fig.tight_layout()
-    fig.savefig(a.out, dpi=100)
-    print(f"wrote {a.out}")
+    fig.savefig(out, dpi=100)
+    print(f"wrote {out}")
     return 0
 
 
