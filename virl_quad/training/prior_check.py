@@ -24,8 +24,10 @@ the feet stand, how high they clear the ground while the body rocks, and how lon
 legs can push through. When the teacher travels against the way the video's ground slides
 (:func:`virl_quad.reward.egomotion.clip_speed`), or at under :data:`MIN_SPEED_SHARE` of the
 gait's own speed (step length x frequency / duty), the :data:`GAIT_VARIANTS` are tried and the
-one whose teacher goes furthest the video's way, falling in at most half its episodes (or no
-more than the kept gait's own teacher), is kept. The contact sheet shows the fitted gait before it.
+one whose teacher goes furthest the video's way is kept: among those that fall in at most
+:data:`STEADY_FALL_RATE` of their episodes when any of them goes further than the kept gait,
+else among those that fall in at most half (or no more than the kept gait's own teacher). The
+contact sheet shows the fitted gait before it.
 """
 
 from __future__ import annotations
@@ -121,30 +123,43 @@ def slowed_to_carry(spec: RobotSpec, demo, finalists: list[TGParams], steps: int
 #: policies reach the speed bars; the fitted bound at a fifth, the pace backwards (docs/experiments.md).
 MIN_SPEED_SHARE = 1.0 / 3.0
 
+#: Share of its episodes under which a variant's teacher counts as steady. A teacher's falls pass
+#: to its student and on to the policy: the pace's variant whose teacher fell in a third of its
+#: episodes, on grippy ground (friction above about 1), made policies that fell there as often
+#: (docs/experiments.md).
+STEADY_FALL_RATE = 1.0 / 8.0
+
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
 #: feet move towards the tail, factor on the swing height, factor on the step length, factor on the
-#: stance height, m every foot moves outwards). The pace fitted to the built-in video (swing 1.5 cm)
+#: stance height, m every foot moves outwards[, added to the duty factor]). The pace fitted to the
+#: built-in video (swing 1.5 cm)
 #: drifts backwards, and walks forwards with its hind feet 2 cm back and 3 cm of swing; the fitted
 #: bound (step 5 cm, swing 3 cm) goes twice as far with a 7.5 cm step, 1.5-2 cm of swing and its
 #: hind feet 2-3 cm back. A crouch (stance x0.8: 0.11 m on Pupper) keeps the dog video's trot
 #: walking on grippy ground, where at the full stance its loaded hind feet drag through their
 #: swing; crouched, it carries a longer step (x1.2), which at the full stance falls; with its feet
-#: also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md).
+#: also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md). The pace
+#: with its hind feet 2 cm back, a step x1.5 and a longer stance (duty +0.1) stays up on grippy
+#: ground, where with its swing halved instead it rolls over.
 GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0, 0.0), (0.02, 1.0, 1.0, 1.0, 0.0), (0.0, 2.0, 1.0, 1.0, 0.0),
                  (0.01, 2.0, 1.0, 1.0, 0.0), (0.02, 2.0, 1.0, 1.0, 0.0), (0.02, 0.67, 1.5, 1.0, 0.0),
                  (0.03, 0.5, 1.5, 1.0, 0.0), (0.0, 1.0, 1.0, 0.8, 0.0), (0.01, 1.0, 1.0, 0.8, 0.0),
                  (0.01, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.2, 0.8, 0.0),
-                 (0.02, 2.0, 1.5, 0.8, 0.04))
-#: The names of a variant's five entries, as the travel check's rows and the fit's report keep them.
-VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale", "widen_m")
+                 (0.02, 2.0, 1.5, 0.8, 0.04), (0.02, 1.0, 1.5, 1.0, 0.0, 0.1))
+#: The names of a variant's entries, as the travel check's rows and the fit's report keep them,
+#: and the value of each that a variant leaves as fitted.
+VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale", "widen_m", "duty_shift")
+VARIANT_NEUTRAL = (0.0, 1.0, 1.0, 1.0, 0.0, 0.0)
 
 
 def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: float,
-                 step_scale: float = 1.0, stance_scale: float = 1.0, widen: float = 0.0) -> TGParams:
+                 step_scale: float = 1.0, stance_scale: float = 1.0, widen: float = 0.0,
+                 duty_shift: float = 0.0) -> TGParams:
     """``tg`` with its hind neutral feet ``hind_back`` m towards the tail, its swing height times
     ``swing_scale``, its step length times ``step_scale``, its stance height (feet below the
-    hips, m) times ``stance_scale`` and every neutral foot ``widen`` m further out sideways
-    (ValueError when a foot then leaves the leg's reach or joint limits)."""
+    hips, m) times ``stance_scale``, every neutral foot ``widen`` m further out sideways and
+    ``duty_shift`` added to its duty factor (ValueError when a foot then leaves the leg's reach
+    or joint limits, or the duty factor leaves the TG's range)."""
     from virl_quad.policy.tg import TrajectoryGenerator
 
     xy = TrajectoryGenerator(spec, tg).neutral_xy.copy()
@@ -153,7 +168,8 @@ def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: f
     moved = TGParams.from_dict({**tg.to_dict(), "neutral_xy": xy.tolist(),
                                 "swing_height": tg.swing_height * swing_scale,
                                 "step_length": tg.step_length * step_scale,
-                                "stance_height": tg.stance_height * stance_scale})
+                                "stance_height": tg.stance_height * stance_scale,
+                                "duty": tg.duty + duty_shift})
     TrajectoryGenerator(spec, moved)                       # reach and joint limits checked
     return moved
 
@@ -163,9 +179,10 @@ def describe_variant(variant: dict) -> str:
     ``swing_scale``, ``step_scale``, ``stance_scale``, ``widen_m``; a missing stance factor is 1,
     a missing widening 0)."""
     stance, widen = variant.get("stance_scale", 1.0), variant.get("widen_m", 0.0)
+    duty = variant.get("duty_shift", 0.0)
     return (f"hind feet {variant['hind_back_m'] * 100:.1f} cm back, swing x{variant['swing_scale']:g}, step "
             f"x{variant['step_scale']:g}" + (f", stance x{stance:g}" if stance != 1.0 else "")
-            + (f", feet {widen * 100:.1f} cm wider" if widen else ""))
+            + (f", feet {widen * 100:.1f} cm wider" if widen else "") + (f", duty {duty:+.2f}" if duty else ""))
 
 
 def nominal_speed(tg: TGParams) -> float:
@@ -178,9 +195,10 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
     """When ``tg``'s teacher (its :func:`teacher_trial` figures: ``trial``) travels against
     ``direction`` (+1: the video's subject goes forwards, -1: backwards) or at under
     :data:`MIN_SPEED_SHARE` of :func:`nominal_speed`, try the :data:`GAIT_VARIANTS` and keep the
-    one that travels furthest in ``direction`` among those whose teacher falls in at most
-    ``max(MAX_FALL_RATE, trial's fall rate)`` of its episodes (none: ``tg``). Returns the kept TG
-    and one row per variant tried."""
+    one that travels furthest in ``direction``, further than ``tg``'s teacher, among those whose
+    teacher falls in at most :data:`STEADY_FALL_RATE` of its episodes; when none of those goes
+    further, among those that fall in at most ``max(MAX_FALL_RATE, trial's fall rate)`` (none:
+    ``tg``). Returns the kept TG and one row per variant tried."""
     speed = trial["speed_mps"] * direction                               # m/s the video's way
     if trial["travel_m"] * direction < 0:
         log("  the kept gait's tracker travels against the video's ground slide: trying gait variants")
@@ -189,22 +207,36 @@ def pick_variant(spec: RobotSpec, demo, tg: TGParams, trial: dict, direction: fl
             f"{nominal_speed(tg):.3f} m/s: trying gait variants")
     else:
         return tg, []
-    allowed = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
-    best, best_travel, best_row, rows = tg, trial["travel_m"] * direction, None, []
+    tried = []                                                           # (TG, row) per variant
     for variant in GAIT_VARIANTS:
         try:
             moved = with_variant(spec, tg, *variant)
         except ValueError:
             continue
-        row = {**dict(zip(VARIANT_KEYS, variant)), **teacher_trial(spec, demo, moved, steps, seed, randomize)}
-        rows.append(row)
+        entries = variant + VARIANT_NEUTRAL[len(variant):]
+        row = {**dict(zip(VARIANT_KEYS, entries)), **teacher_trial(spec, demo, moved, steps, seed, randomize)}
+        tried.append((moved, row))
         log(f"  {describe_variant(row)}: its tracker fell in {row['falls']} of {row['episodes']} episodes, "
             f"mean travel {row['travel_m']:+.2f} m")
-        if row["fall_rate"] <= allowed and row["travel_m"] * direction > best_travel:
-            best, best_travel, best_row = moved, row["travel_m"] * direction, row
-    for r in rows:
-        r["kept"] = r is best_row
-    return best, rows
+    rows = [row for _, row in tried]
+    loose = max(MAX_FALL_RATE, trial.get("fall_rate", 0.0))
+    k = choose_variant(rows, trial["travel_m"] * direction, direction, loose)
+    for i, r in enumerate(rows):
+        r["kept"] = i == k
+    return (tg if k is None else tried[k][0]), rows
+
+
+def choose_variant(rows: list[dict], own_travel: float, direction: float, max_fall_rate: float) -> int | None:
+    """The index of the row (:func:`teacher_trial` figures) whose teacher travels furthest in
+    ``direction`` and further than ``own_travel`` (m, the kept gait's own teacher, already signed
+    that way), among those falling in at most :data:`STEADY_FALL_RATE` of their episodes; when none
+    of those goes further, among those falling in at most ``max_fall_rate``; None when none does."""
+    for allowed in (STEADY_FALL_RATE, max_fall_rate):
+        further = [i for i, r in enumerate(rows)
+                   if r["fall_rate"] <= allowed and r["travel_m"] * direction > own_travel]
+        if further:
+            return max(further, key=lambda i: rows[i]["travel_m"] * direction)
+    return None
 
 
 def gait_for_travel(spec: RobotSpec, demo, tg: TGParams, report: dict, steps: int, seed: int,
