@@ -12,8 +12,8 @@ from virl_quad import robots
 from virl_quad.motion.gaits import gait_params
 from virl_quad.policy.tg import TGParams, TrajectoryGenerator
 from virl_quad.training.prior import gait_tg
-from virl_quad.training.prior_check import (MAX_FALL_RATE, at_speed, nominal_speed, pick_carrying, slowed_to_carry,
-                                            teacher_trial)
+from virl_quad.training.prior_check import (MAX_FALL_RATE, STEADY_FALL_RATE, at_speed, nominal_speed, pick_carrying,
+                                            slowed_to_carry, teacher_trial, with_variant)
 
 PUPPER = robots.get("pupper")
 STEPS = 400   # control steps per finalist (8 s)
@@ -166,8 +166,36 @@ def test_the_backward_pace_gets_a_variant_that_walks_forwards() -> None:
     kept = [r for r in report["travel_check"] if r.get("kept")]
     assert len(kept) == 1 and report["variant"] is not None, lines
     assert kept[0]["travel_m"] > 0.2 and kept[0]["fall_rate"] <= MAX_FALL_RATE, lines
-    assert kept[0]["travel_m"] == max(r["travel_m"] for r in report["travel_check"] if r["fall_rate"] <= MAX_FALL_RATE)
+    steady = [r["travel_m"] for r in report["travel_check"] if r["fall_rate"] <= STEADY_FALL_RATE]
+    assert kept[0]["travel_m"] == max(steady)                            # it goes further than the pace's own
     assert tg != _video_pace() and any("hind feet" in line for line in lines)
+
+
+def test_a_steady_variant_is_kept_before_a_faster_one_that_falls_more() -> None:
+    from virl_quad.training.prior_check import choose_variant
+
+    def row(falls: int, travel: float) -> dict:
+        return {"falls": falls, "episodes": 8, "fall_rate": falls / 8, "travel_m": travel}
+
+    rows = [row(3, 0.9), row(1, 0.5), row(0, 0.4), row(0, -0.6)]
+    assert choose_variant(rows, -0.4, +1.0, MAX_FALL_RATE) == 1          # 1 of 8 is steady; 3 of 8 is not
+    assert choose_variant(rows, 0.6, +1.0, MAX_FALL_RATE) == 0           # no steady one beats 0.6 m: the loose bar
+    assert choose_variant(rows, 1.0, +1.0, MAX_FALL_RATE) is None        # none goes further than the gait itself
+    assert choose_variant(rows, 0.3, -1.0, MAX_FALL_RATE) == 3           # a video walking backwards
+    assert choose_variant([row(5, 2.0)], 0.0, +1.0, MAX_FALL_RATE) is None   # falls in more than half
+
+
+def test_a_variant_can_lengthen_the_stance() -> None:
+    from virl_quad.training.prior_check import GAIT_VARIANTS, VARIANT_KEYS, VARIANT_NEUTRAL, describe_variant
+
+    longer = with_variant(PUPPER, _video_pace(), 0.02, 1.0, 1.5, 1.0, 0.0, 0.1)
+    assert longer.duty == pytest.approx(_video_pace().duty + 0.1)
+    assert longer.step_length == pytest.approx(1.5 * _video_pace().step_length)
+    assert describe_variant(dict(zip(VARIANT_KEYS, (0.02, 1.0, 1.5, 1.0, 0.0, 0.1)))) \
+        == "hind feet 2.0 cm back, swing x1, step x1.5, duty +0.10"
+    assert len(VARIANT_NEUTRAL) == len(VARIANT_KEYS) and all(len(v) <= len(VARIANT_KEYS) for v in GAIT_VARIANTS)
+    with pytest.raises(ValueError):
+        with_variant(PUPPER, _video_pace(), 0.0, 1.0, 1.0, 1.0, 0.0, 0.5)  # duty 1.0: no swing left
 
 
 def test_a_video_without_a_patterned_ground_keeps_its_gait(demo) -> None:

@@ -139,13 +139,13 @@ STEADY_FALL_RATE = 1.0 / 8.0
 #: walking on grippy ground, where at the full stance its loaded hind feet drag through their
 #: swing; crouched, it carries a longer step (x1.2), which at the full stance falls; with its feet
 #: also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md). The pace
-#: with its hind feet 2 cm back, a step x1.5 and a longer stance (duty +0.1) stays up on grippy
+#: with its hind feet 3 cm back, a step x1.65 and a longer stance (duty +0.15) stays up on grippy
 #: ground, where with its swing halved instead it rolls over.
 GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0, 0.0), (0.02, 1.0, 1.0, 1.0, 0.0), (0.0, 2.0, 1.0, 1.0, 0.0),
                  (0.01, 2.0, 1.0, 1.0, 0.0), (0.02, 2.0, 1.0, 1.0, 0.0), (0.02, 0.67, 1.5, 1.0, 0.0),
                  (0.03, 0.5, 1.5, 1.0, 0.0), (0.0, 1.0, 1.0, 0.8, 0.0), (0.01, 1.0, 1.0, 0.8, 0.0),
                  (0.01, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.0, 0.8, 0.0), (0.02, 2.0, 1.2, 0.8, 0.0),
-                 (0.02, 2.0, 1.5, 0.8, 0.04), (0.02, 1.0, 1.5, 1.0, 0.0, 0.1))
+                 (0.02, 2.0, 1.5, 0.8, 0.04), (0.03, 1.0, 1.65, 1.0, 0.0, 0.15))
 #: The names of a variant's entries, as the travel check's rows and the fit's report keep them,
 #: and the value of each that a variant leaves as fitted.
 VARIANT_KEYS = ("hind_back_m", "swing_scale", "step_scale", "stance_scale", "widen_m", "duty_shift")
