@@ -132,15 +132,14 @@ STEADY_FALL_RATE = 1.0 / 8.0
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
 #: feet move towards the tail, factor on the swing height, factor on the step length, factor on the
 #: stance height, m every foot moves outwards[, added to the duty factor]). The pace fitted to the
-#: built-in video (swing 1.5 cm)
-#: drifts backwards, and walks forwards with its hind feet 2 cm back and 3 cm of swing; the fitted
-#: bound (step 5 cm, swing 3 cm) goes twice as far with a 7.5 cm step, 1.5-2 cm of swing and its
-#: hind feet 2-3 cm back. A crouch (stance x0.8: 0.11 m on Pupper) keeps the dog video's trot
-#: walking on grippy ground, where at the full stance its loaded hind feet drag through their
-#: swing; crouched, it carries a longer step (x1.2), which at the full stance falls; with its feet
-#: also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md). The pace
-#: with its hind feet 3 cm back, a step x1.65 and a longer stance (duty +0.15) stays up on grippy
-#: ground, where with its swing halved instead it rolls over.
+#: built-in video (swing 1.5 cm) drifts backwards, and walks forwards with its hind feet 2 cm back
+#: and 3 cm of swing; the fitted bound (step 5 cm, swing 3 cm) goes twice as far with a 7.5 cm step,
+#: 1.5-2 cm of swing and its hind feet 2-3 cm back. A crouch (stance x0.8: 0.11 m on Pupper) keeps
+#: the dog video's trot walking on grippy ground, where at the full stance its loaded hind feet drag
+#: through their swing; crouched, it carries a longer step (x1.2), which at the full stance falls;
+#: with its feet also 4 cm wider apart it rolls less and carries a step x1.5 (docs/experiments.md).
+#: The pace with its hind feet 3 cm back, a step x1.65 and a longer stance (duty +0.15) stays up on
+#: grippy ground, where with its swing halved instead it rolls over.
 GAIT_VARIANTS = ((0.01, 1.0, 1.0, 1.0, 0.0), (0.02, 1.0, 1.0, 1.0, 0.0), (0.0, 2.0, 1.0, 1.0, 0.0),
                  (0.01, 2.0, 1.0, 1.0, 0.0), (0.02, 2.0, 1.0, 1.0, 0.0), (0.02, 0.67, 1.5, 1.0, 0.0),
                  (0.03, 0.5, 1.5, 1.0, 0.0), (0.0, 1.0, 1.0, 0.8, 0.0), (0.01, 1.0, 1.0, 0.8, 0.0),
@@ -176,8 +175,8 @@ def with_variant(spec: RobotSpec, tg: TGParams, hind_back: float, swing_scale: f
 
 def describe_variant(variant: dict) -> str:
     """One phrase for a :data:`GAIT_VARIANTS` entry as a report row names it (``hind_back_m``,
-    ``swing_scale``, ``step_scale``, ``stance_scale``, ``widen_m``; a missing stance factor is 1,
-    a missing widening 0)."""
+    ``swing_scale``, ``step_scale``, ``stance_scale``, ``widen_m``, ``duty_shift``; a missing
+    stance factor is 1, a missing widening or duty shift 0)."""
     stance, widen = variant.get("stance_scale", 1.0), variant.get("widen_m", 0.0)
     duty = variant.get("duty_shift", 0.0)
     return (f"hind feet {variant['hind_back_m'] * 100:.1f} cm back, swing x{variant['swing_scale']:g}, step "
