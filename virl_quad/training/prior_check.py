@@ -124,8 +124,8 @@ def slowed_to_carry(spec: RobotSpec, demo, finalists: list[TGParams], steps: int
 MIN_SPEED_SHARE = 1.0 / 3.0
 
 #: Share of its episodes under which a variant's teacher counts as steady. A teacher's falls pass
-#: to its student and on to the policy: the pace's variant whose teacher fell in a third of its
-#: episodes, on grippy ground (friction above about 1), made policies that fell there as often
+#: to its student and on to the policy: a pace teacher that falls in a third of its episodes, on
+#: grippy ground (friction above about 1), makes policies that fall there as often
 #: (docs/experiments.md).
 STEADY_FALL_RATE = 1.0 / 8.0
 
