@@ -108,3 +108,18 @@ def test_each_run_is_budgeted_by_the_clock_alone(tmp_path: Path) -> None:
     assert ITERATION_CAP > 100 * TrainArgs().run.iterations
     argv = train_argv(CompareArgs(train_args="--iterations 2"), Job("prior", tmp_path / "prior"))
     assert argv[len(argv) - 1 - argv[::-1].index("--iterations") + 1] == "2"
+
+
+def test_a_gait_name_is_passed_on_even_beside_a_folder_of_that_name(tmp_path: Path, monkeypatch) -> None:
+    """A run folder named after a gait (``--run-dir trot``) in the working directory does not turn
+    ``--demo trot`` into a path; a demonstration file is passed on as an absolute path."""
+    from virl_quad.compare import CompareArgs
+    from virl_quad.schedule import Job, train_argv
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "trot").mkdir()
+    (tmp_path / "clip.npz").write_bytes(b"")
+    argv = train_argv(CompareArgs(demo="trot"), Job("virl", tmp_path / "virl"))
+    assert argv[argv.index("--demo") + 1] == "trot"
+    argv = train_argv(CompareArgs(demo="clip.npz"), Job("virl", tmp_path / "virl"))
+    assert argv[argv.index("--demo") + 1] == str(tmp_path / "clip.npz")

@@ -35,8 +35,10 @@ ITERATION_CAP = 1_000_000
 def train_argv(args, job: Job, num_workers: int | None = None) -> list[str]:
     """The ``virl_quad.train`` options of ``job`` under the comparison's options ``args`` (paths
     absolute: a run on another machine of a cluster starts in another folder)."""
+    from virl_quad.motion.gaits import GAIT_NAMES
+
     demo = job.demo or args.demo
-    if Path(demo).exists():
+    if demo.removeprefix("gait:") not in GAIT_NAMES and Path(demo).is_file():   # a gait name beats a folder
         demo = str(Path(demo).resolve())
     argv = ["--robot", args.robot, "--demo", demo, "--reward", job.reward, "--minutes", str(args.minutes),
             "--iterations", str(ITERATION_CAP), "--seed", str(args.seed), "--run-dir", str(job.run_dir.resolve()),
