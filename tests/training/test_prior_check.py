@@ -205,3 +205,18 @@ def test_a_video_without_a_patterned_ground_keeps_its_gait(demo) -> None:
     report = {"physics_check": [{"finalist": 0, "travel_m": -1.0, "fall_rate": 0.0}], "kept_finalist": 0}
     assert gait_for_travel(PUPPER, plain, _trot(), report, STEPS, 0, False) == _trot()
     assert report["variant"] is None and "travel_check" not in report
+
+
+def test_a_crouch_is_kept_only_when_it_walks_clearly_further() -> None:
+    from virl_quad.training.prior_check import UPRIGHT_SHARE, choose_variant
+
+    def row(travel: float, stance: float = 1.0, falls: int = 0) -> dict:
+        return {"falls": falls, "episodes": 8, "fall_rate": falls / 8, "travel_m": travel, "stance_scale": stance}
+
+    trot = [row(1.26), row(1.41, 0.8), row(1.84, falls=4)]               # a trot's check (seed 3)
+    assert choose_variant(trot, 0.78, +1.0, MAX_FALL_RATE) == 0          # upright, 0.89 of the crouch's walk
+    dog = [row(0.85, falls=1), row(1.88, 0.8)]                           # the dog video's check
+    assert choose_variant(dog, 0.64, +1.0, MAX_FALL_RATE) == 1           # the crouch goes 2.2x as far
+    assert choose_variant([row(1.0), row(1.0 / UPRIGHT_SHARE - 0.01, 0.8)], 0.0, +1.0, MAX_FALL_RATE) == 0
+    assert choose_variant([row(0.5), row(0.9, 0.8)], 0.6, +1.0, MAX_FALL_RATE) == 1   # upright not further
+    assert choose_variant([row(1.0, falls=3), row(1.2, 0.8)], 0.0, +1.0, MAX_FALL_RATE) == 1  # steady first

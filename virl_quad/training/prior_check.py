@@ -26,8 +26,9 @@ legs can push through. When the teacher travels against the way the video's grou
 gait's own speed (step length x frequency / duty), the :data:`GAIT_VARIANTS` are tried and the
 one whose teacher goes furthest the video's way is kept: among those that fall in at most
 :data:`STEADY_FALL_RATE` of their episodes when any of them goes further than the kept gait,
-else among those that fall in at most half (or no more than the kept gait's own teacher). The
-contact sheet shows the fitted gait before it.
+else among those that fall in at most half (or no more than the kept gait's own teacher); a
+crouch only when it goes clearly further than the furthest upright variant (:data:`UPRIGHT_SHARE`).
+The contact sheet shows the fitted gait before it.
 """
 
 from __future__ import annotations
@@ -129,6 +130,13 @@ MIN_SPEED_SHARE = 1.0 / 3.0
 #: (docs/experiments.md).
 STEADY_FALL_RATE = 1.0 / 8.0
 
+#: Share of a crouched variant's travel that a variant at the fitted stance height must reach to
+#: be kept before it. A crouch changes the silhouette the video shows and the pose the score
+#: compares (the pace's crouches reach a kinematic pose term of 0.07-0.15 against 0.49 upright; a
+#: trot policy on a crouch scored under standing still), so it is worth only a clearly longer
+#: walk: the dog video's upright variants go under 0.7 as far as its crouches, a trot's 0.9.
+UPRIGHT_SHARE = 0.75
+
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
 #: feet move towards the tail, factor on the swing height, factor on the step length, factor on the
 #: stance height, m every foot moves outwards[, added to the duty factor]). The pace fitted to the
@@ -229,12 +237,20 @@ def choose_variant(rows: list[dict], own_travel: float, direction: float, max_fa
     """The index of the row (:func:`teacher_trial` figures) whose teacher travels furthest in
     ``direction`` and further than ``own_travel`` (m, the kept gait's own teacher, already signed
     that way), among those falling in at most :data:`STEADY_FALL_RATE` of their episodes; when none
-    of those goes further, among those falling in at most ``max_fall_rate``; None when none does."""
+    of those goes further, among those falling in at most ``max_fall_rate``; None when none does.
+    A crouch that goes furthest gives way to the furthest variant at the fitted stance height
+    when that one goes at least :data:`UPRIGHT_SHARE` as far."""
     for allowed in (STEADY_FALL_RATE, max_fall_rate):
         further = [i for i, r in enumerate(rows)
                    if r["fall_rate"] <= allowed and r["travel_m"] * direction > own_travel]
         if further:
-            return max(further, key=lambda i: rows[i]["travel_m"] * direction)
+            best = max(further, key=lambda i: rows[i]["travel_m"] * direction)
+            upright = [i for i in further if rows[i].get("stance_scale", 1.0) == 1.0]
+            if upright and rows[best].get("stance_scale", 1.0) != 1.0:
+                tall = max(upright, key=lambda i: rows[i]["travel_m"] * direction)
+                if rows[tall]["travel_m"] * direction >= UPRIGHT_SHARE * rows[best]["travel_m"] * direction:
+                    return tall
+            return best
     return None
 
 
