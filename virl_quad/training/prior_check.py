@@ -133,8 +133,9 @@ STEADY_FALL_RATE = 1.0 / 8.0
 #: Share of a crouched variant's travel that a variant at the fitted stance height must reach to
 #: be kept before it. A crouch changes the silhouette the video shows and the pose the score
 #: compares (the pace's crouches reach a kinematic pose term of 0.07-0.15 against 0.49 upright; a
-#: trot policy on a crouch scored under standing still), so it is worth only a clearly longer
-#: walk: the dog video's upright variants go under 0.7 as far as its crouches, a trot's 0.9.
+#: trot policy on a crouched prior scores under standing still), so it is worth only a clearly
+#: longer walk: the dog video's upright variants go under 0.7 as far as its crouches, the trot's
+#: about 0.9 (docs/experiments.md).
 UPRIGHT_SHARE = 0.75
 
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
@@ -240,17 +241,15 @@ def choose_variant(rows: list[dict], own_travel: float, direction: float, max_fa
     of those goes further, among those falling in at most ``max_fall_rate``; None when none does.
     A crouch that goes furthest gives way to the furthest variant at the fitted stance height
     when that one goes at least :data:`UPRIGHT_SHARE` as far."""
+    def walk(i: int) -> float:
+        return rows[i]["travel_m"] * direction                           # m, the video's way
+
     for allowed in (STEADY_FALL_RATE, max_fall_rate):
-        further = [i for i, r in enumerate(rows)
-                   if r["fall_rate"] <= allowed and r["travel_m"] * direction > own_travel]
+        further = [i for i, r in enumerate(rows) if r["fall_rate"] <= allowed and walk(i) > own_travel]
         if further:
-            best = max(further, key=lambda i: rows[i]["travel_m"] * direction)
-            upright = [i for i in further if rows[i].get("stance_scale", 1.0) == 1.0]
-            if upright and rows[best].get("stance_scale", 1.0) != 1.0:
-                tall = max(upright, key=lambda i: rows[i]["travel_m"] * direction)
-                if rows[tall]["travel_m"] * direction >= UPRIGHT_SHARE * rows[best]["travel_m"] * direction:
-                    return tall
-            return best
+            best = max(further, key=walk)
+            tall = max((i for i in further if rows[i].get("stance_scale", 1.0) == 1.0), key=walk, default=best)
+            return tall if walk(tall) >= UPRIGHT_SHARE * walk(best) else best
     return None
 
 
