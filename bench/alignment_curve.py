@@ -80,8 +80,8 @@ def many_runs(runs: dict[str, list[dict]], bar: float, out: Path) -> None:
     for name, rows in runs.items():
         align = [r["reward_alignment"] for r in rows]
         dist = [r["distance_alignment"] for r in rows if "distance_alignment" in r]
-        held = "held" if min(align) >= bar else "BELOW"
-        print(f"{name}: {held}; reward {span(align, bar)}" + (f"; distance model alone {span(dist, bar)}" if dist else ""))
+        verdict = "held" if min(align) >= bar else "BELOW"
+        print(f"{name}: {verdict}; reward {span(align, bar)}" + (f"; distance model alone {span(dist, bar)}" if dist else ""))
         ax.plot([r["env_steps"] for r in rows], align, ".-", label=name)
     held = sum(min(r["reward_alignment"] for r in rows) >= bar for rows in runs.values())
     print(f"every probe >= {bar:g} in {held} of {len(runs)} runs")

@@ -132,10 +132,8 @@ STEADY_FALL_RATE = 1.0 / 8.0
 
 #: Share of a crouched variant's travel that a variant at the fitted stance height must reach to
 #: be kept before it. A crouch changes the silhouette the video shows and the pose the score
-#: compares (the pace's crouches reach a kinematic pose term of 0.07-0.15 against 0.49 upright; a
-#: trot policy on a crouched prior scores under standing still), so it is worth only a clearly
-#: longer walk: the dog video's upright variants go under 0.7 as far as its crouches, the trot's
-#: about 0.9 (docs/experiments.md).
+#: compares, so it is worth only a clearly longer walk; the share lies between what the dog
+#: video's upright variants reach (they keep its crouch) and what the trot's do (docs/experiments.md).
 UPRIGHT_SHARE = 0.75
 
 #: Variants tried when the kept finalist's teacher is too slow or goes the wrong way: (m the hind
