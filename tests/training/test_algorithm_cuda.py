@@ -1,6 +1,7 @@
 """VirlPPO on a GPU (``--device cuda``): an update with the anchor and the frozen-actor warm-up runs
-there, and the actor it trained exports to a TorchScript policy that the CPU runs with the same
-actions. Skipped where torch sees no CUDA device."""
+there, the in-run evaluations' wrapper feeds it numpy observations, and the actor it trained
+exports to a TorchScript policy that the CPU runs with the same actions. Skipped where torch sees
+no CUDA device."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from virl_quad.export import default_contract, export_actor, fresh_actor
 from virl_quad.policy_io import load_policy
 from virl_quad.training.algorithm import VirlPPO
 from virl_quad.training.config import TrainArgs, rsl_rl_config
+from virl_quad.training.runner import actor_policy
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 
@@ -84,4 +86,6 @@ def test_an_update_on_the_gpu_exports_a_policy_the_cpu_runs(tmp_path: Path) -> N
         on_gpu = alg.actor(TensorDict({"policy": torch.from_numpy(x).cuda()}, batch_size=[16])).cpu().numpy()
     on_cpu = np.stack([policy.act(row) for row in x])
     np.testing.assert_allclose(on_cpu, on_gpu, atol=1e-4)
+    act = actor_policy(alg.actor)                   # what the in-run evaluations drive the env with
+    np.testing.assert_allclose(act({"policy": x[0]}), on_gpu[0], atol=1e-5)
     assert np.abs(on_gpu).max() > 1e-3

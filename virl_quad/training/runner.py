@@ -37,9 +37,12 @@ SPREAD_LEARNED = 0.02
 
 
 def actor_policy(actor: torch.nn.Module) -> Callable[[dict], np.ndarray]:
-    """Wrap an rsl-rl actor as ``obs dict -> action`` (deterministic mean, numpy)."""
+    """Wrap an rsl-rl actor as ``obs dict -> action`` (deterministic mean, numpy); the observation
+    goes to the actor's device (a GPU with ``--device cuda``) and the action comes back."""
+    device = next(actor.parameters()).device
+
     def act(obs: dict) -> np.ndarray:
-        x = torch.as_tensor(obs["policy"], dtype=torch.float32).reshape(1, -1)
+        x = torch.as_tensor(obs["policy"], dtype=torch.float32, device=device).reshape(1, -1)
         with torch.inference_mode():
             out = actor(TensorDict({"policy": x}, batch_size=[1]))
         return out[0].cpu().numpy().astype(np.float64)
