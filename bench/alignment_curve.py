@@ -77,12 +77,13 @@ def one_run(run_dir: Path, rows: list[dict], bar: float, out: Path) -> None:
 def many_runs(runs: dict[str, list[dict]], bar: float, out: Path) -> None:
     """Print one row per run; plot every run's training-reward alignment against env steps."""
     fig, ax = plt.subplots(figsize=(8, 4))
-    for name, rows in runs.items():
+    colours = plt.get_cmap("tab20" if len(runs) > 10 else "tab10").colors   # one colour per run up to 20
+    for i, (name, rows) in enumerate(runs.items()):
         align = [r["reward_alignment"] for r in rows]
         dist = [r["distance_alignment"] for r in rows if "distance_alignment" in r]
         verdict = "held" if min(align) >= bar else "BELOW"
         print(f"{name}: {verdict}; reward {span(align, bar)}" + (f"; distance model alone {span(dist, bar)}" if dist else ""))
-        ax.plot([r["env_steps"] for r in rows], align, ".-", label=name)
+        ax.plot([r["env_steps"] for r in rows], align, ".-", label=name, color=colours[i % len(colours)])
     held = sum(min(r["reward_alignment"] for r in rows) >= bar for rows in runs.values())
     print(f"every probe >= {bar:g} in {held} of {len(runs)} runs")
     ax.axhline(bar, color="gray", ls="--", label=f"bar {bar:g}")
