@@ -196,3 +196,15 @@ def test_a_search_under_two_px_is_refused_by_the_term_too() -> None:
         eg.ground_shift(frames[:1], frames[1:], np.array([DARK, LIGHT]), reach=1)
     with pytest.raises(ValueError, match="reach"):                # when the term is built
         eg.VideoSpeedTerm(-2.0, 50.0, np.array([DARK, LIGHT]), 1, 1, reach=1)
+
+
+def test_the_speed_term_gates_the_distance_reward() -> None:
+    distance = np.array([0.20, 0.02, 0.10])        # the video's gait, another gait, half-way
+    speed = np.array([0.0, 1.0, 0.5])              # standing, travelling at the video's speed, between
+    r = eg.gated(distance, speed, 0.3)
+    assert r == pytest.approx(distance * np.array([0.7, 1.0, 0.85]))
+    assert r[0] > r[1]                             # another gait that travels stays under the video's own
+    for scale in (0.5, 0.1):                       # a narrower range of distance rewards ranks alike
+        assert np.argsort(eg.gated(scale * distance, speed, 0.3)).tolist() == np.argsort(r).tolist()
+    t = eg.gated(torch.tensor([0.2]), torch.tensor([1.0]), 0.3)
+    assert isinstance(t, torch.Tensor) and float(t) == pytest.approx(0.2)

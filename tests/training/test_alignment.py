@@ -55,5 +55,5 @@ def test_with_the_video_speed_term_the_probe_ranks_the_mixed_reward() -> None:
     out = probe.probe(model)
     assert out["distance_alignment"] == alignment(model, probe.rollouts)[0]
     alone = dict(zip((r.controller for r in probe.rollouts), rollout_rewards(model, probe.rollouts)))
-    assert out["reward_standing"] == pytest.approx(0.7 * alone["standing still"] + 0.3 * speed["standing still"])
+    assert out["reward_standing"] == pytest.approx(alone["standing still"] * (0.7 + 0.3 * speed["standing still"]))
     assert -1.0 <= out["reward_alignment"] <= 1.0

@@ -236,6 +236,17 @@ def clip_speed(frames: np.ndarray, fps: float, levels: np.ndarray | None = None,
     return float(s[valid].mean())
 
 
+def gated(distance_reward, speed_reward, weight: float):
+    """A learned reward with the video speed term: the distance model's reward (in [0, 1]) times
+    ``1 - weight + weight * speed_reward`` (tensors or arrays alike). Travelling at the video's
+    speed keeps the distance reward whole; standing still or going the wrong way takes up to
+    ``weight`` of it away. A product rather than a weighted sum: the term pays only as far as the
+    motion looks like the video, so another gait that travels cannot outrank the video's own, and
+    its say in the ranking does not grow as the distance rewards' range narrows while the
+    distance model trains."""
+    return distance_reward * ((1.0 - weight) + weight * speed_reward)
+
+
 class VideoSpeedTerm:
     """A reward for travelling as fast as the demonstration, measured in both videos alike.
 

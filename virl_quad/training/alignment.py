@@ -159,8 +159,9 @@ class AlignmentProbe:
         out = {}
         if self._speed_rewards is not None:
             out["distance_alignment"] = rho
-            w = self.speed_weight
-            rewards = list((1 - w) * np.asarray(rewards) + w * self._speed_rewards)
+            from virl_quad.reward.egomotion import gated
+
+            rewards = list(gated(np.asarray(rewards), self._speed_rewards, self.speed_weight))
             rho = _rank(rewards, self.rollouts)
         by = _by_controller(self.rollouts, rewards)
         best = max(by, key=lambda name: by[name][1])

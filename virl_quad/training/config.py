@@ -107,11 +107,13 @@ class DistanceOptions:
         "higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves "
         "every behaviour rewarded alike")
     video_speed_weight: float = opt(0.3,
-        "share of a learned reward paid for travelling as fast as the demonstration: the ground's slide "
-        "behind the followed robot, measured alike in the demonstration's and the agent's frames, "
-        "exp(-((v - v_demo) / |v_demo|)^2). The distance model paints the ground out and cannot see "
-        "travel; without this a gait that drifts backwards scores as one that walks. Needs a patterned "
-        "ground (--ground checker): off, with a line, where the demonstration shows none. 0: none")
+        "share of a learned reward that depends on travelling as fast as the demonstration: each step's "
+        "reward is the distance model's times (1 - w + w * exp(-((v - v_demo) / |v_demo|)^2)), v the "
+        "ground's slide behind the followed robot, measured alike in the demonstration's and the agent's "
+        "frames. The distance model paints the ground out and cannot see travel; without this a gait that "
+        "drifts backwards scores as one that walks. A product, so travel pays only as far as the motion "
+        "looks like the video. Needs a patterned ground (--ground checker): off, with a line, where the "
+        "demonstration shows none. 0: none")
     other_demos: str = opt("auto",
         "multi-task clips for the distance model (negatives of another class): \"auto\" = the other "
         "built-in gaits when --demo is one, \"none\", or comma-separated demo sources")

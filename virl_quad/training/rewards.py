@@ -6,9 +6,10 @@ returns the rollout's rewards [T, N] (``finish``):
 - :class:`LearnedReward`: the VIRL distance or one of its baselines/ablations
   (``virl``, ``frame``, ``sequence``, ``no_ae``, ``gaifo``): stores the rollout's
   agent/expert frames in the distance model's dataset, runs M updates, then
-  recomputes every reward of the rollout with the updated model; a share of it
-  (``video_speed_weight``) pays for travelling as fast as the demonstration, the
-  ground's slide measured in both videos (:mod:`virl_quad.reward.egomotion`);
+  recomputes every reward of the rollout with the updated model; the video speed term
+  scales it by how near the agent travels to the demonstration's speed (up to
+  ``video_speed_weight`` of it taken away), the ground's slide measured in both videos
+  (:mod:`virl_quad.reward.egomotion`, :func:`~virl_quad.reward.egomotion.gated`);
 - :class:`EnvReward`: the reward the env computed (``oracle``: the ground-truth
   pose-imitation reward, the upper bound of the comparison);
 - :class:`SurvivalReward`: 1 per step the robot is up (``prior``: no imitation reward at all,
@@ -24,7 +25,7 @@ import torch
 from tensordict import TensorDict
 
 from virl_quad.reward import RewardConfig, build_reward
-from virl_quad.reward.egomotion import VideoSpeedTerm
+from virl_quad.reward.egomotion import VideoSpeedTerm, gated
 from virl_quad.reward.frames import textured_ground
 
 
@@ -92,7 +93,7 @@ class LearnedReward:
                 self._find_agent_ground = False
             r_speed, valid, shift = self.speed.rollout(agent, dones)
             w = self.speed_weight
-            rewards = torch.where(valid.to(rewards.device), (1 - w) * rewards + w * r_speed.to(rewards.device), rewards)
+            rewards = torch.where(valid.to(rewards.device), gated(rewards, r_speed.to(rewards.device), w), rewards)
             if bool(valid.any()):
                 info["video_speed/ratio"] = float(shift[valid].mean()) / self.speed.target
                 info["video_speed/reward"] = float(r_speed[valid].mean())
@@ -129,7 +130,7 @@ def _speed_term(demo_frames: np.ndarray, fps: float, num_envs: int, weight: floa
     if term is None:
         return None, ("video speed term off: the demonstration shows no patterned ground to measure its "
                       "travel by (render it on the checker ground)")
-    return term, (f"video speed term: {weight:g} of the reward for the ground's slide, {term.target:+.2f} px per "
+    return term, (f"video speed term: up to {weight:g} of the reward for the ground's slide, {term.target:+.2f} px per "
                   f"{term.k} frames in the demonstration (negative: forwards), shifts searched to +-{term.reach} px")
 
 
