@@ -22,6 +22,8 @@ import numpy as np
 import torch
 from scipy.stats import spearmanr
 
+from virl_quad.reward.egomotion import VideoSpeedTerm, gated
+
 SKIP = 10  # first frames of an episode left out (the sequence encoder warms up)
 
 Controller = Callable[[object, np.random.Generator, dict], np.ndarray]   # (env, rng, obs) -> action
@@ -120,8 +122,6 @@ def speed_rewards(term, rollouts: list[GradedRollout]) -> list[float]:
     """Mean reward of the video speed term (a :class:`~virl_quad.reward.egomotion.VideoSpeedTerm`,
     whose target, levels and rate are used) over each rollout's frames from :data:`SKIP` on (NaN
     where it never applies)."""
-    from virl_quad.reward.egomotion import VideoSpeedTerm
-
     out = []
     for r in rollouts:
         fresh = VideoSpeedTerm(term.target, term.fps, term.levels, 1, term.k, term.agent_levels, term.reach)
@@ -159,8 +159,6 @@ class AlignmentProbe:
         out = {}
         if self._speed_rewards is not None:
             out["distance_alignment"] = rho
-            from virl_quad.reward.egomotion import gated
-
             rewards = list(gated(np.asarray(rewards), self._speed_rewards, self.speed_weight))
             rho = _rank(rewards, self.rollouts)
         by = _by_controller(self.rollouts, rewards)
