@@ -138,6 +138,7 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
         torch.set_num_threads(1)
     demo, env, runner = build(args, run_dir, data)
     from virl_quad.envs.workers import EnvWorkerLost   # loaded by build with the envs
+    from virl_quad.training import checkpoint
     from virl_quad.training.report import RunLog
 
     log = RunLog(run_dir / "train.log")
@@ -153,6 +154,10 @@ def main(args: TrainArgs, explicit: set[str] = frozenset()) -> int:
                 f"{max(args.run.iterations - runner.current_learning_iteration, 0)} more")
             if reanchor:
                 _reanchor(args, runner, log)
+            if getattr(runner.reward_source, "speed", None) is not None and \
+                    data.get("speed_term", "sum") != checkpoint.SPEED_TERM_FORM:
+                log(f"note: this run was trained with the video speed term added to the distance reward; "
+                    f"it continues with the term as a {checkpoint.SPEED_TERM_FORM} (the current form)")
         log(f"demonstration: {demo.source or args.run.demo}, {demo.num_frames} frames at {demo.fps:.1f} fps"
             f"{', with reference motion' if demo.motion is not None else ''}")
         if getattr(runner.reward_source, "speed_note", ""):

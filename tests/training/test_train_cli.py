@@ -70,11 +70,14 @@ def test_tiny_run_resume_export(robot: str, tmp_path: Path) -> None:
     data["reward"]["config"].update(speed_strip=False, pair_weights={**data["reward"]["config"]["pair_weights"],
                                                                      "speed_shift": 0.25, "ground_shift": 1.0})
     data["reward"]["rollouts"] = 2
+    assert data.pop("speed_term") == "gate"   # as before the gate: the run says its reward changes form
     checkpoint.save(run_dir / checkpoint.LATEST, data)
     p = run("virl_quad.train", "--resume", str(run_dir), "--iterations", "3")
     assert p.returncode == 0, p.stderr[-2000:]
     assert "resumed at iteration 2" in p.stdout and "it     3/3" in p.stdout
+    assert ("continues with the term as a gate" in p.stdout) == (robot == "laikago"), p.stdout[-2000:]
     data = checkpoint.load(run_dir)
+    assert data["speed_term"] == "gate"
     assert data["iteration"] == 3 and data["config"]["ground"] == ("plain" if robot == "pupper" else "checker")
     assert not set(RETIRED) & set(data["config"]) and "speed_strip" not in data["reward"]["config"]
     assert not {"speed_shift", "ground_shift"} & set(data["reward"]["config"]["pair_weights"])

@@ -19,6 +19,12 @@ import torch
 LATEST = "checkpoint.pt"
 
 
+#: How the video speed term enters the reward in checkpoints this version writes: it gates the
+#: distance reward (see :func:`virl_quad.reward.egomotion.gated`). A checkpoint without the key
+#: was trained with the term added as a weighted sum.
+SPEED_TERM_FORM = "gate"
+
+
 def rng_state() -> dict:
     """RNG states of torch, numpy and Python, as weights-only-loadable values."""
     kind, keys, pos, has_gauss, cached = np.random.get_state()

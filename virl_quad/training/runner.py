@@ -97,7 +97,7 @@ class VirlRunner(OnPolicyRunner):
                 "standing": self.standing, "frozen_updates": self.alg.frozen_updates,
                 "actor_normalizer_fixed": not self.alg.actor.obs_normalization,
                 "anchor": {"pull": self.alg.prior_pull, "weights": self.alg.anchor},
-                "peak_spread": self._peak_spread,
+                "peak_spread": self._peak_spread, "speed_term": checkpoint.SPEED_TERM_FORM,
                 "contract": checkpoint.contract_payload(self.env.contract, self.env.spec)}
 
     def save_checkpoint(self) -> Path:
