@@ -93,38 +93,3 @@ def test_open_episodes_train_the_model_before_any_episode_ends(small_cfg, demo, 
     rm.add_rollout(*rollout, np.zeros((24, 2), bool))
     rng = np.random.default_rng(0)
     assert any("expert_vs_agent" in rm.sampler.draw(rng).kinds for _ in range(20))
-
-
-def test_reservoir_keeps_a_uniform_sample_of_evicted_episodes_under_its_budget():
-    store = EpisodeStore(max_bytes=20 * FRAME_BYTES, reservoir_bytes=50 * FRAME_BYTES, seed=3)
-    for v in range(200):
-        store.add_episode(*ep(10, v))
-    assert len(store) == 2 and store.episodes_evicted == 198
-    assert store.reservoir_count == 5 and store.reservoir_nbytes <= store.reservoir_bytes
-    kept = sorted(int(a[0, 0, 0]) for a, _ in store.sequences()[len(store):])
-    assert all(v < 198 for v in kept)                    # evicted ones only, not the recent two
-    assert min(kept) < 100                               # not just the latest evicted
-    # over many seeds every evicted episode is about equally likely to be held
-    counts = np.zeros(198)
-    for seed in range(300):
-        s = EpisodeStore(max_bytes=20 * FRAME_BYTES, reservoir_bytes=50 * FRAME_BYTES, seed=seed)
-        for v in range(200):
-            s.add_episode(*ep(10, v))
-        for a, _ in s.sequences()[len(s):]:
-            counts[int(a[0, 0, 0])] += 1
-    first, last = counts[:99].sum(), counts[99:].sum()
-    assert abs(first - last) < 0.15 * (first + last)
-    assert EpisodeStore(max_bytes=20 * FRAME_BYTES).reservoir_count == 0
-
-
-def test_reservoir_off_keeps_nothing_and_oversized_episodes_are_skipped():
-    store = EpisodeStore(max_bytes=10 * FRAME_BYTES)
-    for v in range(5):
-        store.add_episode(*ep(10, v))
-    assert store.reservoir_count == 0 and len(store.sequences()) == 1
-    store = EpisodeStore(max_bytes=30 * FRAME_BYTES, reservoir_bytes=5 * FRAME_BYTES)
-    for v in range(5):
-        store.add_episode(*ep(10, v))
-    assert store.reservoir_count == 0                    # 10 frames never fit in 5
-    with pytest.raises(ValueError, match="reservoir_bytes"):
-        EpisodeStore(max_bytes=10, reservoir_bytes=-1)

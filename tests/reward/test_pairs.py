@@ -117,22 +117,3 @@ def test_other_clip_only_with_clips_and_weights(small_cfg, demo):
     assert "reversed" not in rm.sampler.available(8, have_agent=True)[1]
     with pytest.raises(ValueError, match="pair_weights"):
         RewardConfig.make(pair_weights={"nope": 1.0}).validate()
-
-
-def test_agent_windows_come_from_the_reservoir_at_its_share(small_cfg, demo, agent_episode):
-    cfg = RewardConfig.make(**{**small_cfg.to_dict(), "max_bytes": 45 * 2 * 48 * 48,
-                               "reservoir_bytes": 10**8, "reservoir_share": 0.25})
-    rm = build_reward(cfg, demo, None, seed=0)
-    for s in range(6):
-        rm.add_episode(*agent_episode(s))                  # 40 frames each: one recent, five evicted
-    assert len(rm.dataset) == 1 and rm.dataset.reservoir_count == 5
-    eligible = np.arange(6)
-    p = rm.sampler.episode_chances(eligible, num_recent=1)
-    assert p[0] == pytest.approx(0.75) and p[1:].sum() == pytest.approx(0.25) and np.allclose(p[1:], p[1])
-    assert rm.sampler.episode_chances(eligible[1:], num_recent=1) is None     # only old ones: uniform
-    rng = np.random.default_rng(0)
-    rm.sampler.draw(rng)
-    picks = [rm.sampler._agent_window(rng, eligible, 8)[0] is rm.dataset.episode(0)[0] for _ in range(2000)]
-    assert 0.7 < np.mean(picks) < 0.8                      # the recent episode at its 0.75
-    with pytest.raises(ValueError, match="reservoir_share"):
-        RewardConfig.make(reservoir_share=1.5).validate()

@@ -39,7 +39,7 @@ from virl_quad.reward.trainer import Trainer
 FORMAT = "virl_quad.reward/1"
 _CHUNK = 512  # frames per encoder call in batch recomputation (cache-sized: faster per frame)
 #: RewardConfig fields a resumed run may change: they shape training or the reward, not the model.
-RESUME_MAY_CHANGE = ("pair_weights", "w_d", "reservoir_bytes", "reservoir_share")
+RESUME_MAY_CHANGE = ("pair_weights", "w_d")
 
 
 @dataclass(frozen=True)
@@ -99,8 +99,7 @@ class RewardModel:
         self._levels = levels                                    # gray levels painted white
         self._levels_t = torch.from_numpy(levels).to(self.device)
         self.demo, self.clips = paint(demo, levels), [paint(c, levels) for c in clips]   # what the model sees
-        self.dataset = EpisodeStore(cfg.store.max_bytes, cfg.store.max_episode_frames,
-                                    cfg.store.reservoir_bytes, self.seed)
+        self.dataset = EpisodeStore(cfg.store.max_bytes, cfg.store.max_episode_frames)
         with torch.random.fork_rng(devices=[]):  # seeded weight init, caller's global RNG untouched
             torch.manual_seed(self.seed)
             self.net = self._build_net().to(self.device).eval()
@@ -264,8 +263,7 @@ class RewardModel:
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} state (format {d.get('format')!r})")
         saved, mine = without_retired(d["config"]), self.cfg.to_dict()   # an older version's settings
-        for key in RESUME_MAY_CHANGE:                 # how pairs are drawn and d becomes a reward (the
-                                                      # dataset is not saved: a resume starts it empty)
+        for key in RESUME_MAY_CHANGE:                 # how pairs are drawn and d becomes a reward
             saved.pop(key, None)
             mine.pop(key, None)
         if saved != mine:

@@ -151,13 +151,6 @@ class StoreConfig:
 
     max_bytes: int = 256 * 2**20      # bytes of frames kept (agent + expert), oldest evicted
     max_episode_frames: int = 512     # frames; longer episodes are stored as pieces this long
-    reservoir_bytes: int = 128 * 2**20  # bytes for a uniform sample of every episode the recent
-                                      # store evicted (reservoir sampling): ~55 iterations fill
-                                      # the recent store, and a model that only sees the current
-                                      # policy's frames forgets how the earlier, worse behaviours
-                                      # rank (AMP's replay buffer, project choice); 0: off
-    reservoir_share: float = 0.5      # fraction of agent windows drawn from the reservoir once it
-                                      # holds a long enough episode
 
 
 @dataclass
@@ -216,9 +209,6 @@ class RewardConfig(Sectioned):
             raise ValueError(f"ae_frames must be >= 0, got {self.loss.ae_frames}")
         if self.store.max_bytes <= 0 or self.store.max_episode_frames < 2:
             raise ValueError("max_bytes must be positive and max_episode_frames >= 2")
-        if self.store.reservoir_bytes < 0 or not 0.0 <= self.store.reservoir_share <= 1.0:
-            raise ValueError(f"need reservoir_bytes >= 0 and reservoir_share in [0, 1], got "
-                             f"{self.store.reservoir_bytes}, {self.store.reservoir_share}")
         unknown = set(self.pairs.pair_weights) - set(POSITIVE_PAIRS) - set(NEGATIVE_PAIRS)
         if unknown:
             raise ValueError(f"unknown pair constructors in pair_weights: {sorted(unknown)}")

@@ -2,10 +2,7 @@
 
 Memory is bounded in bytes (frame payload: agent + expert images, including
 the per-env buffers of episodes still open in :meth:`EpisodeStore.add_rollout`);
-the oldest finished episodes are evicted first. An optional reservoir keeps a
-uniform sample of everything evicted (reservoir sampling over episodes, under its
-own byte budget), so that a model trained on the store keeps seeing the agent's
-older behaviours after the recent window has moved past them.
+the oldest finished episodes are evicted first.
 """
 
 from __future__ import annotations
@@ -18,20 +15,13 @@ from virl_quad.reward.frames import FRAME, to_mask, to_uint8
 
 
 class EpisodeStore:
-    """A FIFO of (agent [T, 48, 48] uint8, expert [T, 48, 48] uint8) episodes under a byte budget,
-    and an optional reservoir of the episodes it evicted (``reservoir_bytes``; 0: none)."""
+    """A FIFO of (agent [T, 48, 48] uint8, expert [T, 48, 48] uint8) episodes under a byte budget."""
 
-    def __init__(self, max_bytes: int, max_episode_frames: int = 512, reservoir_bytes: int = 0,
-                 seed: int = 0) -> None:
-        if max_bytes <= 0 or max_episode_frames < 2 or reservoir_bytes < 0:
-            raise ValueError("max_bytes must be positive, max_episode_frames >= 2 and reservoir_bytes >= 0")
+    def __init__(self, max_bytes: int, max_episode_frames: int = 512) -> None:
+        if max_bytes <= 0 or max_episode_frames < 2:
+            raise ValueError("max_bytes must be positive and max_episode_frames >= 2")
         self.max_bytes = int(max_bytes)
         self.max_episode_frames = int(max_episode_frames)
-        self.reservoir_bytes = int(reservoir_bytes)
-        self._reservoir: list[tuple[np.ndarray, np.ndarray]] = []
-        self._reservoir_used = 0                 # bytes held by the reservoir
-        self._offered = 0                        # episodes ever evicted from the FIFO
-        self._rng = np.random.default_rng(seed)  # which evicted episodes the reservoir keeps
         self._episodes: deque[tuple[np.ndarray, np.ndarray]] = deque()
         self._stored_bytes = 0
         self._open: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}  # env -> (agent, expert buffers, used)
@@ -133,27 +123,6 @@ class EpisodeStore:
             a, e = self._episodes.popleft()
             self._stored_bytes -= a.nbytes + e.nbytes
             self.episodes_evicted += 1
-            self._offer(a, e)
-
-    def _offer(self, a: np.ndarray, e: np.ndarray) -> None:
-        """Reservoir sampling over evicted episodes: the k-th is kept with chance (count held) / k,
-        in place of random ones, so the reservoir stays a uniform sample of the run so far."""
-        self._offered += 1
-        size = a.nbytes + e.nbytes
-        if size > self.reservoir_bytes:
-            return
-        held = len(self._reservoir)
-        if self._reservoir_used + size > self.reservoir_bytes:
-            if self._rng.random() >= held / self._offered:
-                return
-            while self._reservoir and self._reservoir_used + size > self.reservoir_bytes:
-                i = int(self._rng.integers(len(self._reservoir)))
-                out_a, out_e = self._reservoir[i]
-                self._reservoir[i] = self._reservoir[-1]
-                self._reservoir.pop()
-                self._reservoir_used -= out_a.nbytes + out_e.nbytes
-        self._reservoir.append((a, e))
-        self._reservoir_used += size
 
     # -- reading ----------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -169,20 +138,8 @@ class EpisodeStore:
         return np.array([a.shape[0] for a, _ in self._episodes], dtype=np.int64)
 
     def sequences(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """What a batch may sample: the finished episodes (oldest first), the open ones so far (views),
-        then the reservoir's (the last :attr:`reservoir_count`)."""
-        return (list(self._episodes) + [(a[:u], e[:u]) for a, e, u in self._open.values() if u]
-                + self._reservoir)
-
-    @property
-    def reservoir_count(self) -> int:
-        """Episodes held by the reservoir."""
-        return len(self._reservoir)
-
-    @property
-    def reservoir_nbytes(self) -> int:
-        """Bytes of frame payload held by the reservoir (at most ``reservoir_bytes``)."""
-        return self._reservoir_used
+        """What a batch may sample: the finished episodes (oldest first), then the open ones so far (views)."""
+        return list(self._episodes) + [(a[:u], e[:u]) for a, e, u in self._open.values() if u]
 
     @property
     def num_frames(self) -> int:

@@ -36,7 +36,6 @@ class PairSampler:
                  dataset: EpisodeStore) -> None:
         self.cfg, self.demo, self.clips, self.dataset = cfg, demo, list(clips), dataset
         self._seqs: list[tuple[np.ndarray, np.ndarray]] = []
-        self._p: np.ndarray | None = None          # chances of the eligible episodes (None: uniform)
         off = cfg.pairs.same_source_max_offset
         shortest = min(c.shape[0] for c in [demo] + self.clips)
         if not cfg.pairs.clips_cyclic and shortest < cfg.pairs.window_min + 1 + 2 * off:
@@ -57,7 +56,7 @@ class PairSampler:
     def _agent_window(self, rng: np.random.Generator, eligible: np.ndarray, need: int
                       ) -> tuple[np.ndarray, np.ndarray, int]:
         """(agent uint8 episode, expert uint8 episode, EESP start) for a window of ``need`` frames."""
-        agent, expert = self._seqs[int(rng.choice(eligible, p=self._p))]
+        agent, expert = self._seqs[int(rng.choice(eligible))]
         return agent, expert, augment.eesp_start(rng, agent.shape[0], need)
 
     def _anchor(self, rng: np.random.Generator, eligible: np.ndarray, need: int) -> np.ndarray:
@@ -80,17 +79,6 @@ class PairSampler:
             o1, o2 = rng.integers(0, 2 * off + 1, size=2)
             x1, x2 = stream[o1:o1 + L], stream[o2:o2 + L]
         return pairs.same_source(x1, x2, L)
-
-    def episode_chances(self, eligible: np.ndarray, num_recent: int) -> np.ndarray | None:
-        """Chances of the eligible episodes: ``reservoir_share`` in all for the reservoir's (the
-        sequences from index ``num_recent`` on), the rest for the recent ones, uniform within each;
-        None (uniform over all) while either group has none."""
-        old = eligible >= num_recent
-        n_old = int(old.sum())
-        if n_old == 0 or n_old == eligible.size:
-            return None
-        share = self.cfg.store.reservoir_share
-        return np.where(old, share / n_old, (1.0 - share) / (eligible.size - n_old))
 
     # -- batch --------------------------------------------------------------------------------
     def window_length(self, rng: np.random.Generator) -> int:
@@ -139,7 +127,6 @@ class PairSampler:
         self._seqs = self.dataset.sequences()       # finished and open agent episodes
         lengths = np.array([a.shape[0] for a, _ in self._seqs], dtype=np.int64)
         eligible = np.flatnonzero(lengths >= L + 1)
-        self._p = self.episode_chances(eligible, len(self._seqs) - self.dataset.reservoir_count)
         pos, neg = self.available(L, eligible.size > 0)
         kinds = [self._pick(rng, pos) for _ in range(B // 2)] + [self._pick(rng, neg) for _ in range(B - B // 2)]
         made = [self.make_pair(rng, k, L, eligible) for k in kinds]
