@@ -101,7 +101,11 @@ class DistanceOptions:
         "own pairs, the other clips and one rollout of the warm-started policy: an untrained model "
         "rewards every behaviour about alike; 0: none")
     reward_lr: float = opt(1e-3, "distance-model Adam learning rate")
-    reward_wd: float = opt(-5.0, "w_d in r = exp(w_d * d^2) (paper: -5)")
+    reward_wd: float = opt(-1.0,
+        "w_d in r = exp(w_d * d^2), d^2 in units of the demonstration's distance to other gaits "
+        "(paper: -5 on raw distances): a policy's reward is a mean over steps, and the steeper the "
+        "exponential, the more a rollout's few closest steps outweigh its typical distance; late in "
+        "a run, as the model pushes agent frames away, -5 ranks rollouts by those outliers")
     adversarial_weight: float = opt(0.1,
         "sampling weight of expert-vs-agent negative pairs relative to each other pair kind (paper: 1): "
         "higher separates agent from expert sooner, until every agent behaviour gets reward 0; 0 leaves "
